@@ -1,0 +1,5 @@
+//! One module per subcommand: its arguments (with units in the help) and its thin driver.
+
+pub mod emulate;
+pub mod ndf;
+pub mod stream;

@@ -1,0 +1,40 @@
+//! `brdfmill` — the command line. A thin layer over the library: it parses arguments, reads and writes
+//! files, draws progress and maps errors to exit codes.
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+mod cli;
+
+/// Turn a target reflectance (BRDF) into a millable microgeometry.
+#[derive(Parser, Debug)]
+#[command(name = "brdfmill", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// BRDF → target NDF in slope space (half-angle distribution, Lucy–Richardson deconvolution of the base
+    /// lobe, mean tilt removed). Writes ndf.json and optionally a PNG.
+    Ndf(cli::ndf::Args),
+    /// Stream a G-code program to a GRBL 1.1 controller over a serial port (character counting, journal,
+    /// resume, check mode, feed hold on Ctrl-C).
+    Stream(cli::stream::Args),
+    /// Run a virtual GRBL 1.1 controller on a pseudo-terminal and print its port path (for tests and dry runs).
+    Emulate(cli::emulate::Args),
+}
+
+fn main() {
+    let cli = Cli::parse();
+    let result: Result<()> = match cli.command {
+        Command::Ndf(a) => cli::ndf::run(&a),
+        Command::Stream(a) => cli::stream::run(&a),
+        Command::Emulate(a) => cli::emulate::run(&a),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}

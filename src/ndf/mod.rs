@@ -1,0 +1,275 @@
+//! Stage 2 — BRDF → target NDF (Section 7.1, DESIGN.md §2).
+//!
+//! 1. The BRDF's half-angle distribution on a slope grid ([`halfangle`]): the *observed* distribution `O`.
+//! 2. Lucy–Richardson deconvolution of the base material's own lobe `K` ([`deconvolve`]): the facet
+//!    distribution that, blurred by the material, shows `O`.
+//! 3. The mean slope removed (Section 7.2: a tileable surface has zero mean slope), and reported.
+//!
+//! The result is an [`Ndf`], saved as `ndf.json` ([`format`]) and drawn as a PNG.
+//!
+//! ```
+//! use brdfmill::{brdf::Brdf, ndf};
+//! let cfg = ndf::NdfConfig { res: 64, ..Default::default() };
+//! let out = ndf::run(&cfg, &Brdf::parse("beckmann:alpha=0.3").unwrap(), None).unwrap();
+//! let var = out.stats.cov[0][0];
+//! assert!((var - 0.045).abs() < 0.002, "{var}");
+//! ```
+
+pub mod deconvolve;
+pub mod format;
+pub mod halfangle;
+
+pub use deconvolve::{LrReport, LucyRichardson, StoppedBy};
+pub use format::NdfFile;
+pub use halfangle::{HalfAngleConfig, Source};
+
+use crate::brdf::{Brdf, ConductorIor};
+use crate::slope::{SlopeDomain, SlopeGrid, SlopeStats};
+use serde::{Deserialize, Serialize};
+
+/// Errors of the NDF stage.
+#[derive(Debug, thiserror::Error)]
+pub enum NdfError {
+    /// A configuration value is out of range.
+    #[error("ndf config: `{field}` {reason}")]
+    Config {
+        /// The offending field.
+        field: &'static str,
+        /// What was expected.
+        reason: String,
+    },
+    /// The BRDF gives no usable distribution on the grid.
+    #[error("{what}: the half-angle distribution has no mass on the slope grid (|p|, |q| ≤ {max_slope:.3}); is the BRDF zero or all below the horizon?")]
+    Empty {
+        /// Which distribution.
+        what: String,
+        /// Half-width of the slope grid.
+        max_slope: f64,
+    },
+}
+
+/// Configuration of the NDF stage. Angles in degrees at this interface.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct NdfConfig {
+    /// Grid resolution per axis (cells).
+    pub res: usize,
+    /// Half-width of the slope grid as a polar angle in degrees: `|p|, |q| ≤ tan(max_angle_deg)`.
+    pub max_angle_deg: f64,
+    /// Lucy–Richardson iteration limit.
+    pub iterations: usize,
+    /// Stop earlier when an iteration changes the estimate by less than this (relative L1); 0 disables.
+    pub tolerance: f64,
+    /// How the half-angle distribution is read off the BRDF.
+    pub half_angle: HalfAngleConfig,
+}
+
+impl Default for NdfConfig {
+    fn default() -> Self {
+        Self {
+            res: 256,
+            max_angle_deg: 60.0,
+            iterations: 200,
+            tolerance: 1e-5,
+            half_angle: HalfAngleConfig::default(),
+        }
+    }
+}
+
+impl NdfConfig {
+    /// Check every field; the error names it.
+    pub fn validate(&self) -> Result<(), NdfError> {
+        let bad = |field, reason: &str| {
+            Err(NdfError::Config {
+                field,
+                reason: reason.into(),
+            })
+        };
+        if !(8..=4096).contains(&self.res) {
+            return bad("res", &format!("must be in 8..=4096, got {}", self.res));
+        }
+        if !(self.max_angle_deg > 1.0 && self.max_angle_deg < 89.0) {
+            return bad(
+                "max_angle_deg",
+                &format!("must be in (1, 89) degrees, got {}", self.max_angle_deg),
+            );
+        }
+        if !(self.tolerance >= 0.0 && self.tolerance.is_finite()) {
+            return bad(
+                "tolerance",
+                &format!("must be a finite number ≥ 0, got {}", self.tolerance),
+            );
+        }
+        let td = self.half_angle.theta_d_deg;
+        if !(0.0..45.0).contains(&td) {
+            return bad(
+                "half_angle.theta_d_deg",
+                &format!("must be in [0, 45) degrees, got {td}"),
+            );
+        }
+        if self.half_angle.phi_d_samples == 0 {
+            return bad("half_angle.phi_d_samples", "must be at least 1");
+        }
+        Ok(())
+    }
+
+    /// The slope domain of this configuration.
+    pub fn domain(&self) -> SlopeDomain {
+        SlopeDomain::square(self.res, self.max_angle_deg.to_radians().tan())
+    }
+}
+
+/// The tilt removed from a distribution so that its mean slope is zero.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Tilt {
+    /// Mean x slope removed.
+    pub p: f64,
+    /// Mean y slope removed.
+    pub q: f64,
+    /// The same as the angle between the mean normal and z, in degrees.
+    pub deg: f64,
+}
+
+/// The output of the NDF stage.
+#[derive(Clone, Debug)]
+pub struct Ndf {
+    /// The target facet distribution `P22` (deconvolved, zero-mean, unit mass).
+    pub target: SlopeGrid,
+    /// The observed half-angle distribution `O` (tilt removed likewise, unit mass): the reference that
+    /// verification compares fabricated surfaces with.
+    pub observed: SlopeGrid,
+    /// Statistics of `target`.
+    pub stats: SlopeStats,
+    /// Statistics of `observed`.
+    pub observed_stats: SlopeStats,
+    /// The tilt removed.
+    pub tilt: Tilt,
+    /// What the deconvolution did.
+    pub deconvolution: LrReport,
+    /// Where the half-angle distribution came from.
+    pub source: Source,
+    /// The spec of the target BRDF.
+    pub brdf_spec: String,
+    /// The spec of the base lobe, if any.
+    pub base_spec: Option<String>,
+    /// The fabrication material, when the spec named one.
+    pub material: Option<ConductorIor>,
+    /// The configuration used.
+    pub config: NdfConfig,
+}
+
+/// The base lobe `K` as an odd-sized kernel on the grid spacing of `domain`, centred at slope 0 and cropped
+/// to where it exceeds `1e-7` of its peak. Returns `(values, width, height)`.
+pub fn base_kernel(base: &Brdf, domain: &SlopeDomain, cfg: &NdfConfig) -> Result<(Vec<f64>, usize, usize), NdfError> {
+    let (dp, dq) = (domain.dp(), domain.dq());
+    let (mx, my) = (domain.nx / 2, domain.ny / 2);
+    let kd = SlopeDomain {
+        nx: 2 * mx + 1,
+        ny: 2 * my + 1,
+        p_min: -(mx as f64 + 0.5) * dp,
+        p_max: (mx as f64 + 0.5) * dp,
+        q_min: -(my as f64 + 0.5) * dq,
+        q_max: (my as f64 + 0.5) * dq,
+    };
+    let (k, _) = halfangle::half_angle_density(base, kd, &cfg.half_angle);
+    let peak = k.density.iter().copied().fold(0.0, f64::max);
+    if peak.is_nan() || peak <= 0.0 {
+        return Err(NdfError::Empty {
+            what: format!("base lobe `{}`", base.spec),
+            max_slope: domain.p_max,
+        });
+    }
+    // Symmetric crop around the centre to the support above the threshold.
+    let thr = 1e-7 * peak;
+    let (mut rx, mut ry) = (0usize, 0usize);
+    for j in 0..kd.ny {
+        for i in 0..kd.nx {
+            if k.at(i, j) > thr {
+                rx = rx.max(i.abs_diff(mx));
+                ry = ry.max(j.abs_diff(my));
+            }
+        }
+    }
+    let (kw, kh) = (2 * rx + 1, 2 * ry + 1);
+    let mut out = Vec::with_capacity(kw * kh);
+    for j in (my - ry)..=(my + ry) {
+        for i in (mx - rx)..=(mx + rx) {
+            out.push(k.at(i, j));
+        }
+    }
+    Ok((out, kw, kh))
+}
+
+fn remove_tilt(g: &SlopeGrid, p0: f64, q0: f64) -> SlopeGrid {
+    if p0 == 0.0 && q0 == 0.0 {
+        return g.clone();
+    }
+    let mut s = g.shifted(p0, q0);
+    s.normalise();
+    s
+}
+
+/// Run the NDF stage: the target BRDF's observed half-angle distribution, deconvolved by the base lobe's
+/// (when `base` is given), with its mean tilt removed.
+pub fn run(cfg: &NdfConfig, brdf: &Brdf, base: Option<&Brdf>) -> Result<Ndf, NdfError> {
+    cfg.validate()?;
+    let domain = cfg.domain();
+    let (observed, source) = halfangle::half_angle_density(brdf, domain, &cfg.half_angle);
+    if observed.mass().is_nan() || observed.mass() <= 0.0 {
+        return Err(NdfError::Empty {
+            what: format!("BRDF `{}`", brdf.spec),
+            max_slope: domain.p_max,
+        });
+    }
+    let mut target = observed.clone();
+    let deconvolution = match base {
+        None => LrReport::none(),
+        Some(b) => {
+            let (k, kw, kh) = base_kernel(b, &domain, cfg)?;
+            let mut lr = LucyRichardson::new(domain.nx, domain.ny, &k, kw, kh);
+            lr.run(&observed.density, &mut target.density, cfg.iterations, cfg.tolerance)
+        }
+    };
+    target.normalise();
+    let m = target.stats().mean;
+    let tilt = Tilt {
+        p: m[0],
+        q: m[1],
+        deg: (m[0] * m[0] + m[1] * m[1]).sqrt().atan().to_degrees(),
+    };
+    // Shift both distributions by the same slope so they stay comparable.
+    let target = remove_tilt(&target, m[0], m[1]);
+    let observed = remove_tilt(&observed, m[0], m[1]);
+    Ok(Ndf {
+        stats: target.stats(),
+        observed_stats: observed.stats(),
+        target,
+        observed,
+        tilt,
+        deconvolution,
+        source,
+        brdf_spec: brdf.spec.clone(),
+        base_spec: base.map(|b| b.spec.clone()),
+        material: brdf.material,
+        config: *cfg,
+    })
+}
+
+/// Draw a slope density as a false-colour PNG figure (log scale over 4 decades, axes in slope units).
+pub fn render_png(grid: &SlopeGrid, title: &str) -> crate::plot::Canvas {
+    let d = &grid.domain;
+    crate::plot::Heatmap {
+        values: &grid.density,
+        nx: d.nx,
+        ny: d.ny,
+        x_range: (d.p_min, d.p_max),
+        y_range: (d.q_min, d.q_max),
+        title: title.to_string(),
+        x_label: "p = dz/dx (slope)".into(),
+        y_label: "q = dz/dy".into(),
+        value_label: "P22 (log)".into(),
+        scale: crate::plot::Scale::Log { decades: 4.0 },
+        plot_px: 384,
+    }
+    .render()
+}

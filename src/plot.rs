@@ -1,0 +1,324 @@
+//! Figures as PNG: false-colour maps with axes, ticks, a colour bar and a title.
+//!
+//! Pixels are drawn into a [`Canvas`]; text and lines come from `embedded-graphics` (its built-in bitmap
+//! fonts need no font files on the user's machine); colour maps from `colorous`; PNG encoding from `png`.
+
+use embedded_graphics::{
+    mono_font::{ascii::FONT_6X10, MonoTextStyle},
+    pixelcolor::Rgb888,
+    prelude::*,
+    primitives::{Line, PrimitiveStyle, Rectangle},
+    text::{Alignment, Text},
+};
+use std::path::Path;
+
+/// An RGB image being drawn.
+#[derive(Clone, Debug)]
+pub struct Canvas {
+    /// Width in pixels.
+    pub width: u32,
+    /// Height in pixels.
+    pub height: u32,
+    /// Row-major RGB pixels, top row first.
+    pub pixels: Vec<[u8; 3]>,
+}
+
+impl OriginDimensions for Canvas {
+    fn size(&self) -> Size {
+        Size::new(self.width, self.height)
+    }
+}
+
+impl DrawTarget for Canvas {
+    type Color = Rgb888;
+    type Error = std::convert::Infallible;
+
+    fn draw_iter<I>(&mut self, pixels: I) -> Result<(), Self::Error>
+    where
+        I: IntoIterator<Item = Pixel<Self::Color>>,
+    {
+        for Pixel(p, c) in pixels {
+            if p.x >= 0 && p.y >= 0 && (p.x as u32) < self.width && (p.y as u32) < self.height {
+                self.pixels[p.y as usize * self.width as usize + p.x as usize] = [c.r(), c.g(), c.b()];
+            }
+        }
+        Ok(())
+    }
+}
+
+const BLACK: Rgb888 = Rgb888::new(0, 0, 0);
+
+impl Canvas {
+    /// A white canvas.
+    pub fn new(width: u32, height: u32) -> Self {
+        Self {
+            width,
+            height,
+            pixels: vec![[255, 255, 255]; (width * height) as usize],
+        }
+    }
+
+    /// Set one pixel (ignored outside the canvas).
+    #[inline]
+    pub fn put(&mut self, x: i64, y: i64, c: [u8; 3]) {
+        if x >= 0 && y >= 0 && (x as u32) < self.width && (y as u32) < self.height {
+            self.pixels[y as usize * self.width as usize + x as usize] = c;
+        }
+    }
+
+    /// Draw text with its anchor at `(x, y)` (baseline), aligned left, centre or right.
+    pub fn text(&mut self, x: i32, y: i32, s: &str, align: Alignment) {
+        let style = MonoTextStyle::new(&FONT_6X10, BLACK);
+        Text::with_alignment(s, Point::new(x, y), style, align).draw(self).ok();
+    }
+
+    /// A one-pixel black line.
+    pub fn line(&mut self, x0: i32, y0: i32, x1: i32, y1: i32) {
+        Line::new(Point::new(x0, y0), Point::new(x1, y1))
+            .into_styled(PrimitiveStyle::with_stroke(BLACK, 1))
+            .draw(self)
+            .ok();
+    }
+
+    /// A one-pixel black rectangle outline.
+    pub fn frame(&mut self, x: i32, y: i32, w: u32, h: u32) {
+        Rectangle::new(Point::new(x, y), Size::new(w, h))
+            .into_styled(PrimitiveStyle::with_stroke(BLACK, 1))
+            .draw(self)
+            .ok();
+    }
+
+    /// Copy another canvas in with its top-left corner at `(x, y)`.
+    pub fn blit(&mut self, other: &Canvas, x: i64, y: i64) {
+        for j in 0..other.height as i64 {
+            for i in 0..other.width as i64 {
+                self.put(x + i, y + j, other.pixels[(j * other.width as i64 + i) as usize]);
+            }
+        }
+    }
+
+    /// Encode as PNG bytes.
+    pub fn to_png(&self) -> Vec<u8> {
+        let mut out = Vec::new();
+        {
+            let mut enc = png::Encoder::new(&mut out, self.width, self.height);
+            enc.set_color(png::ColorType::Rgb);
+            enc.set_depth(png::BitDepth::Eight);
+            let mut w = enc.write_header().expect("PNG header to memory");
+            let flat: Vec<u8> = self.pixels.iter().flatten().copied().collect();
+            w.write_image_data(&flat).expect("PNG data to memory");
+        }
+        out
+    }
+
+    /// Write as a PNG file, atomically.
+    pub fn save_png(&self, path: &Path) -> Result<(), crate::io::WriteError> {
+        crate::io::write_atomic(path, &self.to_png())
+    }
+}
+
+/// How values map to colour.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Scale {
+    /// Linear between the minimum and maximum.
+    Linear,
+    /// log10, spanning the given number of decades below the maximum.
+    Log {
+        /// Decades shown below the maximum.
+        decades: f64,
+    },
+}
+
+/// A false-colour map of a regular grid with axes.
+#[derive(Clone, Debug)]
+pub struct Heatmap<'a> {
+    /// Values, row-major, row 0 at `y_range.0` (drawn at the bottom).
+    pub values: &'a [f64],
+    /// Columns.
+    pub nx: usize,
+    /// Rows.
+    pub ny: usize,
+    /// Extent along x (left edge, right edge).
+    pub x_range: (f64, f64),
+    /// Extent along y (bottom edge, top edge).
+    pub y_range: (f64, f64),
+    /// Title above the plot.
+    pub title: String,
+    /// Label of the x axis.
+    pub x_label: String,
+    /// Label of the y axis.
+    pub y_label: String,
+    /// Label of the colour bar.
+    pub value_label: String,
+    /// Colour scale.
+    pub scale: Scale,
+    /// Side of the square plot area in pixels.
+    pub plot_px: u32,
+}
+
+/// "Nice" tick positions covering `[lo, hi]` with about `n` ticks.
+pub fn nice_ticks(lo: f64, hi: f64, n: usize) -> Vec<f64> {
+    if !lo.is_finite() || !hi.is_finite() || hi <= lo {
+        return vec![];
+    }
+    let raw = (hi - lo) / n.max(1) as f64;
+    let mag = 10f64.powf(raw.log10().floor());
+    let step = [1.0, 2.0, 2.5, 5.0, 10.0]
+        .iter()
+        .map(|m| m * mag)
+        .find(|s| *s >= raw)
+        .unwrap_or(10.0 * mag);
+    let mut t = (lo / step).ceil() * step;
+    let mut out = vec![];
+    while t <= hi + 1e-9 * step {
+        out.push(if t.abs() < 1e-12 * step { 0.0 } else { t });
+        t += step;
+    }
+    out
+}
+
+fn fmt_tick(v: f64) -> String {
+    if v == 0.0 {
+        return "0".into();
+    }
+    let a = v.abs();
+    if (0.01..1e4).contains(&a) {
+        let s = format!("{v:.3}");
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        format!("{v:.0e}")
+    }
+}
+
+/// Map a value in `[0, 1]` to the viridis colour map.
+pub fn viridis(t: f64) -> [u8; 3] {
+    let c = colorous::VIRIDIS.eval_continuous(t.clamp(0.0, 1.0));
+    [c.r, c.g, c.b]
+}
+
+impl Heatmap<'_> {
+    /// Render to a canvas.
+    pub fn render(&self) -> Canvas {
+        let p = self.plot_px as i32;
+        let (left, top, right, bottom) = (70, 28, 110, 44);
+        let mut cv = Canvas::new((left + p + right) as u32, (top + p + bottom) as u32);
+        let finite: Vec<f64> = self.values.iter().copied().filter(|v| v.is_finite()).collect();
+        let vmax = finite.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let vmin = finite.iter().copied().fold(f64::INFINITY, f64::min);
+        let (lo, hi, map): (f64, f64, Box<dyn Fn(f64) -> f64>) = match self.scale {
+            Scale::Linear => {
+                let (lo, hi) = if vmax > vmin {
+                    (vmin, vmax)
+                } else {
+                    (vmin - 1.0, vmin + 1.0)
+                };
+                (lo, hi, Box::new(move |v| (v - lo) / (hi - lo)))
+            }
+            Scale::Log { decades } => {
+                let hi = if vmax > 0.0 { vmax.log10() } else { 0.0 };
+                let lo = hi - decades;
+                (
+                    lo,
+                    hi,
+                    Box::new(move |v: f64| if v > 0.0 { (v.log10() - lo) / (hi - lo) } else { 0.0 }),
+                )
+            }
+        };
+        // the map
+        for py in 0..p {
+            let fy = 1.0 - (py as f64 + 0.5) / p as f64;
+            let j = ((fy * self.ny as f64) as usize).min(self.ny - 1);
+            for px in 0..p {
+                let fx = (px as f64 + 0.5) / p as f64;
+                let i = ((fx * self.nx as f64) as usize).min(self.nx - 1);
+                let v = self.values[j * self.nx + i];
+                let c = if v.is_finite() {
+                    viridis(map(v))
+                } else {
+                    [200, 200, 200]
+                };
+                cv.put((left + px) as i64, (top + py) as i64, c);
+            }
+        }
+        cv.frame(left - 1, top - 1, (p + 2) as u32, (p + 2) as u32);
+        // axes and ticks
+        let (x0, x1) = self.x_range;
+        let (y0, y1) = self.y_range;
+        for t in nice_ticks(x0, x1, 6) {
+            let px = left + ((t - x0) / (x1 - x0) * p as f64).round() as i32;
+            cv.line(px, top + p, px, top + p + 4);
+            cv.text(px, top + p + 14, &fmt_tick(t), Alignment::Center);
+        }
+        for t in nice_ticks(y0, y1, 6) {
+            let py = top + p - ((t - y0) / (y1 - y0) * p as f64).round() as i32;
+            cv.line(left - 5, py, left - 1, py);
+            cv.text(left - 7, py + 3, &fmt_tick(t), Alignment::Right);
+        }
+        cv.text(left + p / 2, top + p + 30, &self.x_label, Alignment::Center);
+        cv.text(4, top - 8, &self.y_label, Alignment::Left);
+        cv.text(left + p / 2, 14, &self.title, Alignment::Center);
+        // colour bar
+        let (bx, bw) = (left + p + 16, 14);
+        for py in 0..p {
+            let t = 1.0 - (py as f64 + 0.5) / p as f64;
+            for px in 0..bw {
+                cv.put((bx + px) as i64, (top + py) as i64, viridis(t));
+            }
+        }
+        cv.frame(bx - 1, top - 1, (bw + 2) as u32, (p + 2) as u32);
+        for t in nice_ticks(lo, hi, 5) {
+            let py = top + p - ((t - lo) / (hi - lo) * p as f64).round() as i32;
+            cv.line(bx + bw, py, bx + bw + 3, py);
+            let label = match self.scale {
+                Scale::Log { .. } => format!("1e{}", t.round() as i64),
+                Scale::Linear => fmt_tick(t),
+            };
+            cv.text(bx + bw + 6, py + 3, &label, Alignment::Left);
+        }
+        cv.text(bx - 4, top - 8, &self.value_label, Alignment::Left);
+        cv
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ticks_are_nice_and_inside() {
+        let t = nice_ticks(-1.732, 1.732, 6);
+        assert!(t.contains(&0.0) && t.contains(&1.0) && t.contains(&-1.0), "{t:?}");
+        assert!(t.iter().all(|v| (-1.732..=1.732).contains(v)));
+        assert!(nice_ticks(1.0, 1.0, 5).is_empty());
+    }
+
+    #[test]
+    fn heatmap_encodes_a_png_of_the_right_size() {
+        let v: Vec<f64> = (0..64).map(|k| (k as f64).exp()).collect();
+        let h = Heatmap {
+            values: &v,
+            nx: 8,
+            ny: 8,
+            x_range: (-1.0, 1.0),
+            y_range: (-1.0, 1.0),
+            title: "t".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            value_label: "v".into(),
+            scale: Scale::Log { decades: 4.0 },
+            plot_px: 100,
+        };
+        let cv = h.render();
+        let png = cv.to_png();
+        assert_eq!(&png[1..4], b"PNG");
+        let dec = png::Decoder::new(std::io::Cursor::new(png));
+        let reader = dec.read_info().unwrap();
+        assert_eq!(reader.info().width, cv.width);
+        // the brightest cell (top right) is yellow, the dimmest (bottom left, clipped) dark purple
+        let at = |x: u32, y: u32| cv.pixels[(y * cv.width + x) as usize];
+        let hi = at(70 + 95, 28 + 5);
+        let lo = at(70 + 5, 28 + 95);
+        assert!(hi[0] > 200 && hi[1] > 200, "{hi:?}");
+        assert!(lo[0] < 80 && lo[2] > 60, "{lo:?}");
+    }
+}
