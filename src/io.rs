@@ -7,7 +7,7 @@ use std::path::{Path, PathBuf};
 
 /// An output file could not be written.
 #[derive(Debug, thiserror::Error)]
-#[error("cannot write {path}: {source}")]
+#[error("cannot write {path}")]
 pub struct WriteError {
     /// The destination that was not written.
     pub path: PathBuf,

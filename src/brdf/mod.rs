@@ -47,7 +47,7 @@ pub enum BrdfError {
         reason: String,
     },
     /// A data file could not be opened or read.
-    #[error("{path}: {source}")]
+    #[error("cannot read {path}")]
     Io {
         /// The file.
         path: PathBuf,

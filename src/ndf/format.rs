@@ -108,7 +108,7 @@ pub struct NdfFile {
 #[derive(Debug, thiserror::Error)]
 pub enum NdfFileError {
     /// Could not read the file.
-    #[error("{path}: {source}")]
+    #[error("cannot read {path}")]
     Io {
         /// The file.
         path: std::path::PathBuf,
