@@ -24,5 +24,6 @@ pub mod brdf;
 pub mod geometry;
 pub mod io;
 pub mod ndf;
+pub mod npy;
 pub mod plot;
 pub mod slope;

@@ -35,6 +35,10 @@ pub fn fast_len(n: usize) -> usize {
 }
 
 /// Linear 2D convolution of an `nx × ny` grid with a fixed odd-sized kernel, "same" size output.
+///
+/// One convolution: real FFTs of the `ny` data rows (the padding rows are zero and skipped), a transpose,
+/// per column a forward FFT, the product with the kernel spectrum and the inverse FFT in one pass (the
+/// column stays in cache), a transpose of the `ny` rows that are kept, and their inverse real FFTs.
 pub struct Convolver {
     nx: usize,
     ny: usize,
@@ -47,9 +51,9 @@ pub struct Convolver {
     col_inv: Arc<dyn Fft<f64>>,
     /// Kernel spectrum, transposed layout `[kx][ky]`, scaled by `1/(px·py)`.
     kernel: Vec<Complex64>,
-    /// Work buffers.
-    real: Vec<f64>,
+    /// Row spectra, `py × hx` (only the first `ny` rows are ever non-zero).
     spec: Vec<Complex64>,
+    /// Column-major spectra, `hx × py`.
     spec_t: Vec<Complex64>,
 }
 
@@ -61,27 +65,22 @@ impl Convolver {
         let (mx, my) = (kw / 2, kh / 2);
         let (px, py) = (fast_len(nx + mx), fast_len(ny + my));
         let mut rp = RealFftPlanner::<f64>::new();
-        let r2c = rp.plan_fft_forward(px);
-        let c2r = rp.plan_fft_inverse(px);
         let mut cp = FftPlanner::<f64>::new();
-        let col_fwd = cp.plan_fft_forward(py);
-        let col_inv = cp.plan_fft_inverse(py);
         let hx = px / 2 + 1;
         let mut me = Self {
             nx,
             ny,
             px,
             py,
-            r2c,
-            c2r,
-            col_fwd,
-            col_inv,
+            r2c: rp.plan_fft_forward(px),
+            c2r: rp.plan_fft_inverse(px),
+            col_fwd: cp.plan_fft_forward(py),
+            col_inv: cp.plan_fft_inverse(py),
             kernel: vec![],
-            real: vec![0.0; px * py],
             spec: vec![Complex64::default(); hx * py],
             spec_t: vec![Complex64::default(); hx * py],
         };
-        // Kernel centred at index 0 with wrap-around.
+        // Kernel centred at index 0 with wrap-around: every padded row may be non-zero.
         let mut kgrid = vec![0.0; px * py];
         for j in 0..kh {
             for i in 0..kw {
@@ -90,8 +89,13 @@ impl Convolver {
                 kgrid[y * px + x] = kernel[j * kw + i];
             }
         }
-        me.real.copy_from_slice(&kgrid);
-        me.forward();
+        me.rows_forward(&kgrid, px, py);
+        transpose(&me.spec, &mut me.spec_t, hx, py);
+        let f = &me.col_fwd;
+        me.spec_t.par_chunks_mut(py).for_each_init(
+            || vec![Complex64::default(); f.get_inplace_scratch_len()],
+            |s, col| f.process_with_scratch(col, s),
+        );
         let scale = 1.0 / (px * py) as f64;
         me.kernel = me.spec_t.iter().map(|c| c * scale).collect();
         me
@@ -102,71 +106,77 @@ impl Convolver {
         (self.px, self.py)
     }
 
-    /// `self.real` → `self.spec_t` (transposed spectrum).
-    fn forward(&mut self) {
-        let (px, py, hx) = (self.px, self.py, self.px / 2 + 1);
+    /// Real FFT of the first `rows` rows of `input` (row length `stride`, zero-padded to `px`) into
+    /// `self.spec`; the remaining padded rows are set to zero.
+    fn rows_forward(&mut self, input: &[f64], stride: usize, rows: usize) {
+        let (px, hx, nx) = (self.px, self.px / 2 + 1, stride.min(self.px));
         let r2c = &self.r2c;
-        self.real
-            .par_chunks_mut(px)
-            .zip(self.spec.par_chunks_mut(hx))
-            .for_each_init(
-                || r2c.make_scratch_vec(),
-                |scratch, (row, out)| {
-                    r2c.process_with_scratch(row, out, scratch).expect("row FFT lengths");
-                },
-            );
-        transpose(&self.spec, &mut self.spec_t, hx, py);
-        let f = &self.col_fwd;
-        self.spec_t.par_chunks_mut(py).for_each_init(
-            || vec![Complex64::default(); f.get_inplace_scratch_len()],
-            |s, col| f.process_with_scratch(col, s),
+        let (head, tail) = self.spec.split_at_mut(rows * hx);
+        tail.iter_mut().for_each(|c| *c = Complex64::default());
+        head.par_chunks_mut(hx).enumerate().for_each_init(
+            || (vec![0.0; px], r2c.make_scratch_vec()),
+            |(buf, scratch), (j, out)| {
+                buf[..nx].copy_from_slice(&input[j * stride..j * stride + nx]);
+                buf[nx..].iter_mut().for_each(|v| *v = 0.0);
+                r2c.process_with_scratch(buf, out, scratch).expect("row FFT lengths");
+            },
         );
     }
 
-    /// `self.spec_t` → `self.real`.
-    fn inverse(&mut self) {
-        let (px, py, hx) = (self.px, self.py, self.px / 2 + 1);
-        let f = &self.col_inv;
-        self.spec_t.par_chunks_mut(py).for_each_init(
-            || vec![Complex64::default(); f.get_inplace_scratch_len()],
-            |s, col| f.process_with_scratch(col, s),
+    /// `out = input ⊛ K` (or `⊛ K̂`, the mirrored kernel, when `mirror`), same size as the input.
+    pub fn convolve(&mut self, input: &[f64], out: &mut [f64], mirror: bool) {
+        let (nx, ny, px, py, hx) = (self.nx, self.ny, self.px, self.py, self.px / 2 + 1);
+        assert_eq!(input.len(), nx * ny);
+        assert_eq!(out.len(), nx * ny);
+        self.rows_forward(input, nx, ny);
+        transpose(&self.spec, &mut self.spec_t, hx, py);
+        let (fwd, inv, kernel) = (&self.col_fwd, &self.col_inv, &self.kernel);
+        let scratch_len = fwd.get_inplace_scratch_len().max(inv.get_inplace_scratch_len());
+        self.spec_t.par_chunks_mut(py).zip(kernel.par_chunks(py)).for_each_init(
+            || vec![Complex64::default(); scratch_len],
+            |s, (col, k)| {
+                fwd.process_with_scratch(col, s);
+                if mirror {
+                    col.iter_mut().zip(k).for_each(|(c, k)| *c *= k.conj());
+                } else {
+                    col.iter_mut().zip(k).for_each(|(c, k)| *c *= k);
+                }
+                inv.process_with_scratch(col, s);
+            },
         );
-        transpose(&self.spec_t, &mut self.spec, py, hx);
+        // Only the first ny rows of the result are kept.
+        transpose_rows(&self.spec_t, &mut self.spec, py, hx, ny);
         let c2r = &self.c2r;
-        self.spec
+        self.spec[..ny * hx]
             .par_chunks_mut(hx)
-            .zip(self.real.par_chunks_mut(px))
+            .zip(out.par_chunks_mut(nx))
             .for_each_init(
-                || c2r.make_scratch_vec(),
-                |scratch, (row, out)| {
+                || (vec![0.0; px], c2r.make_scratch_vec()),
+                |(buf, scratch), (row, o)| {
                     // The DC and Nyquist terms of a real signal's spectrum are real; round-off may leave a
                     // tiny imaginary part that realfft refuses.
                     row[0].im = 0.0;
                     if px % 2 == 0 {
                         row[hx - 1].im = 0.0;
                     }
-                    c2r.process_with_scratch(row, out, scratch).expect("row iFFT lengths");
+                    c2r.process_with_scratch(row, buf, scratch).expect("row iFFT lengths");
+                    o.copy_from_slice(&buf[..nx]);
                 },
             );
     }
+}
 
-    /// `out = input ⊛ K` (or `⊛ K̂`, the mirrored kernel, when `mirror`), same size as the input.
-    pub fn convolve(&mut self, input: &[f64], out: &mut [f64], mirror: bool) {
-        let (nx, ny, px) = (self.nx, self.ny, self.px);
-        assert_eq!(input.len(), nx * ny);
-        assert_eq!(out.len(), nx * ny);
-        self.real.iter_mut().for_each(|v| *v = 0.0);
-        for j in 0..ny {
-            self.real[j * px..j * px + nx].copy_from_slice(&input[j * nx..(j + 1) * nx]);
-        }
-        self.forward();
-        let k = &self.kernel;
-        self.spec_t.par_iter_mut().zip(k.par_iter()).for_each(|(s, k)| {
-            *s *= if mirror { k.conj() } else { *k };
-        });
-        self.inverse();
-        for j in 0..ny {
-            out[j * nx..(j + 1) * nx].copy_from_slice(&self.real[j * px..j * px + nx]);
+/// Transpose the first `rows` columns of a `w × h` column-major-as-rows matrix: `dst[j·w + i] = src[i·h + j]`
+/// for `j < rows`.
+fn transpose_rows(src: &[Complex64], dst: &mut [Complex64], h: usize, w: usize, rows: usize) {
+    const B: usize = 32;
+    for jb in (0..rows).step_by(B) {
+        for ib in (0..w).step_by(B) {
+            for j in jb..(jb + B).min(rows) {
+                for i in ib..(ib + B).min(w) {
+                    dst[j * w + i] = src[i * h + j];
+                }
+            }
         }
     }
 }

@@ -1,0 +1,93 @@
+//! NumPy `.npy` arrays of `f64` (via `npyz`), so any Python user can load grids and heightfields.
+
+use npyz::WriterBuilder;
+use std::path::Path;
+
+/// A `.npy` file that could not be read as a 2D `f64` array.
+#[derive(Debug, thiserror::Error)]
+pub enum NpyError {
+    /// Could not open or read the file.
+    #[error("cannot read {path}")]
+    Io {
+        /// The file.
+        path: std::path::PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// Not a 2D little-endian float64 C-order array.
+    #[error("{path}: {reason}")]
+    Format {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong.
+        reason: String,
+    },
+}
+
+/// Write a row-major `rows × cols` array of `f64` as `.npy` (C order, little-endian), atomically.
+pub fn write_f64_2d(path: &Path, rows: usize, cols: usize, data: &[f64]) -> Result<(), crate::io::WriteError> {
+    assert_eq!(data.len(), rows * cols, "npy shape does not match the data");
+    crate::io::write_atomic_with(path, |w| {
+        let mut writer = npyz::WriteOptions::<f64>::new()
+            .default_dtype()
+            .shape(&[rows as u64, cols as u64])
+            .writer(w)
+            .begin_nd()?;
+        writer.extend(data.iter().copied())?;
+        writer.finish()
+    })
+}
+
+/// Read a 2D `f64` array (C order); returns `(rows, cols, data)`.
+pub fn read_f64_2d(path: &Path) -> Result<(usize, usize, Vec<f64>), NpyError> {
+    let bytes = std::fs::read(path).map_err(|source| NpyError::Io {
+        path: path.to_path_buf(),
+        source,
+    })?;
+    let fmt = |reason: String| NpyError::Format {
+        path: path.to_path_buf(),
+        reason,
+    };
+    let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| fmt(format!("not a .npy file: {e}")))?;
+    let shape = npy.shape().to_vec();
+    if shape.len() != 2 {
+        return Err(fmt(format!("expected a 2D array, got shape {shape:?}")));
+    }
+    if npy.order() != npyz::Order::C {
+        return Err(fmt("expected C (row-major) order, got Fortran order".into()));
+    }
+    let data: Vec<f64> = npy
+        .into_vec::<f64>()
+        .map_err(|e| fmt(format!("expected float64 values: {e}")))?;
+    Ok((shape[0] as usize, shape[1] as usize, data))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.npy");
+        let data: Vec<f64> = (0..12).map(|k| k as f64 * 0.5 - 1.0).collect();
+        write_f64_2d(&p, 3, 4, &data).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        assert_eq!(&bytes[..6], b"\x93NUMPY");
+        let header = String::from_utf8_lossy(&bytes[10..80]);
+        assert!(
+            header.contains("'<f8'") && header.contains("'shape': (3, 4"),
+            "{header}"
+        );
+        assert_eq!(read_f64_2d(&p).unwrap(), (3, 4, data));
+    }
+
+    #[test]
+    fn not_npy_is_an_error() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.npy");
+        std::fs::write(&p, b"hello").unwrap();
+        assert!(read_f64_2d(&p).unwrap_err().to_string().contains("not a .npy file"));
+    }
+}
