@@ -21,6 +21,7 @@
 #![warn(missing_docs)]
 
 pub mod brdf;
+pub mod fft2;
 pub mod geometry;
 pub mod io;
 pub mod ndf;

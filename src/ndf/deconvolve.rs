@@ -8,14 +8,13 @@
 //!
 //! The slope plane is not periodic, so convolutions are linear: the grid is zero-padded to at least
 //! `n + m` per axis (`m` the kernel half-width), the kernel is stored centred at index 0 with wrap-around, so
-//! the output needs no shift and the mirrored kernel's spectrum is the complex conjugate. Real-to-complex
-//! FFTs (`realfft` on `rustfft`) are planned once; rows and columns run in parallel with rayon.
+//! the output needs no shift and the mirrored kernel's spectrum is the complex conjugate. The FFTs are
+//! [`RealFft2`](crate::fft2::RealFft2), planned once.
 
+use crate::fft2::RealFft2;
 use rayon::prelude::*;
-use realfft::{ComplexToReal, RealFftPlanner, RealToComplex};
-use rustfft::{num_complex::Complex64, Fft, FftPlanner};
+use rustfft::num_complex::Complex64;
 use serde::{Deserialize, Serialize};
-use std::sync::Arc;
 
 /// Smallest even length ≥ `n` whose only prime factors are 2, 3 and 5 (fast for rustfft).
 pub fn fast_len(n: usize) -> usize {
@@ -35,26 +34,12 @@ pub fn fast_len(n: usize) -> usize {
 }
 
 /// Linear 2D convolution of an `nx × ny` grid with a fixed odd-sized kernel, "same" size output.
-///
-/// One convolution: real FFTs of the `ny` data rows (the padding rows are zero and skipped), a transpose,
-/// per column a forward FFT, the product with the kernel spectrum and the inverse FFT in one pass (the
-/// column stays in cache), a transpose of the `ny` rows that are kept, and their inverse real FFTs.
 pub struct Convolver {
     nx: usize,
     ny: usize,
-    /// Padded sizes.
-    px: usize,
-    py: usize,
-    r2c: Arc<dyn RealToComplex<f64>>,
-    c2r: Arc<dyn ComplexToReal<f64>>,
-    col_fwd: Arc<dyn Fft<f64>>,
-    col_inv: Arc<dyn Fft<f64>>,
-    /// Kernel spectrum, transposed layout `[kx][ky]`, scaled by `1/(px·py)`.
+    fft: RealFft2,
+    /// Kernel spectrum, column-major `[kx][ky]`.
     kernel: Vec<Complex64>,
-    /// Row spectra, `py × hx` (only the first `ny` rows are ever non-zero).
-    spec: Vec<Complex64>,
-    /// Column-major spectra, `hx × py`.
-    spec_t: Vec<Complex64>,
 }
 
 impl Convolver {
@@ -64,23 +49,8 @@ impl Convolver {
         assert_eq!(kernel.len(), kw * kh);
         let (mx, my) = (kw / 2, kh / 2);
         let (px, py) = (fast_len(nx + mx), fast_len(ny + my));
-        let mut rp = RealFftPlanner::<f64>::new();
-        let mut cp = FftPlanner::<f64>::new();
-        let hx = px / 2 + 1;
-        let mut me = Self {
-            nx,
-            ny,
-            px,
-            py,
-            r2c: rp.plan_fft_forward(px),
-            c2r: rp.plan_fft_inverse(px),
-            col_fwd: cp.plan_fft_forward(py),
-            col_inv: cp.plan_fft_inverse(py),
-            kernel: vec![],
-            spec: vec![Complex64::default(); hx * py],
-            spec_t: vec![Complex64::default(); hx * py],
-        };
-        // Kernel centred at index 0 with wrap-around: every padded row may be non-zero.
+        let mut fft = RealFft2::new(px, py);
+        // Kernel centred at index 0 with wrap-around.
         let mut kgrid = vec![0.0; px * py];
         for j in 0..kh {
             for i in 0..kw {
@@ -89,109 +59,30 @@ impl Convolver {
                 kgrid[y * px + x] = kernel[j * kw + i];
             }
         }
-        me.rows_forward(&kgrid, px, py);
-        transpose(&me.spec, &mut me.spec_t, hx, py);
-        let f = &me.col_fwd;
-        me.spec_t.par_chunks_mut(py).for_each_init(
-            || vec![Complex64::default(); f.get_inplace_scratch_len()],
-            |s, col| f.process_with_scratch(col, s),
-        );
-        let scale = 1.0 / (px * py) as f64;
-        me.kernel = me.spec_t.iter().map(|c| c * scale).collect();
-        me
+        let kernel = fft.forward_spectrum(&kgrid, px, py);
+        Self { nx, ny, fft, kernel }
     }
 
     /// The padded FFT size `(px, py)`.
     pub fn padded_size(&self) -> (usize, usize) {
-        (self.px, self.py)
-    }
-
-    /// Real FFT of the first `rows` rows of `input` (row length `stride`, zero-padded to `px`) into
-    /// `self.spec`; the remaining padded rows are set to zero.
-    fn rows_forward(&mut self, input: &[f64], stride: usize, rows: usize) {
-        let (px, hx, nx) = (self.px, self.px / 2 + 1, stride.min(self.px));
-        let r2c = &self.r2c;
-        let (head, tail) = self.spec.split_at_mut(rows * hx);
-        tail.iter_mut().for_each(|c| *c = Complex64::default());
-        head.par_chunks_mut(hx).enumerate().for_each_init(
-            || (vec![0.0; px], r2c.make_scratch_vec()),
-            |(buf, scratch), (j, out)| {
-                buf[..nx].copy_from_slice(&input[j * stride..j * stride + nx]);
-                buf[nx..].iter_mut().for_each(|v| *v = 0.0);
-                r2c.process_with_scratch(buf, out, scratch).expect("row FFT lengths");
-            },
-        );
+        self.fft.size()
     }
 
     /// `out = input ⊛ K` (or `⊛ K̂`, the mirrored kernel, when `mirror`), same size as the input.
     pub fn convolve(&mut self, input: &[f64], out: &mut [f64], mirror: bool) {
-        let (nx, ny, px, py, hx) = (self.nx, self.ny, self.px, self.py, self.px / 2 + 1);
+        let (nx, ny) = (self.nx, self.ny);
         assert_eq!(input.len(), nx * ny);
         assert_eq!(out.len(), nx * ny);
-        self.rows_forward(input, nx, ny);
-        transpose(&self.spec, &mut self.spec_t, hx, py);
-        let (fwd, inv, kernel) = (&self.col_fwd, &self.col_inv, &self.kernel);
-        let scratch_len = fwd.get_inplace_scratch_len().max(inv.get_inplace_scratch_len());
-        self.spec_t.par_chunks_mut(py).zip(kernel.par_chunks(py)).for_each_init(
-            || vec![Complex64::default(); scratch_len],
-            |s, (col, k)| {
-                fwd.process_with_scratch(col, s);
-                if mirror {
-                    col.iter_mut().zip(k).for_each(|(c, k)| *c *= k.conj());
-                } else {
-                    col.iter_mut().zip(k).for_each(|(c, k)| *c *= k);
-                }
-                inv.process_with_scratch(col, s);
-            },
-        );
-        // Only the first ny rows of the result are kept.
-        transpose_rows(&self.spec_t, &mut self.spec, py, hx, ny);
-        let c2r = &self.c2r;
-        self.spec[..ny * hx]
-            .par_chunks_mut(hx)
-            .zip(out.par_chunks_mut(nx))
-            .for_each_init(
-                || (vec![0.0; px], c2r.make_scratch_vec()),
-                |(buf, scratch), (row, o)| {
-                    // The DC and Nyquist terms of a real signal's spectrum are real; round-off may leave a
-                    // tiny imaginary part that realfft refuses.
-                    row[0].im = 0.0;
-                    if px % 2 == 0 {
-                        row[hx - 1].im = 0.0;
-                    }
-                    c2r.process_with_scratch(row, buf, scratch).expect("row iFFT lengths");
-                    o.copy_from_slice(&buf[..nx]);
-                },
-            );
-    }
-}
-
-/// Transpose the first `rows` columns of a `w × h` column-major-as-rows matrix: `dst[j·w + i] = src[i·h + j]`
-/// for `j < rows`.
-fn transpose_rows(src: &[Complex64], dst: &mut [Complex64], h: usize, w: usize, rows: usize) {
-    const B: usize = 32;
-    for jb in (0..rows).step_by(B) {
-        for ib in (0..w).step_by(B) {
-            for j in jb..(jb + B).min(rows) {
-                for i in ib..(ib + B).min(w) {
-                    dst[j * w + i] = src[i * h + j];
-                }
+        let py = self.fft.size().1;
+        let kernel = &self.kernel;
+        self.fft.filter(input, nx, ny, out, nx, ny, |kx, col| {
+            let k = &kernel[kx * py..(kx + 1) * py];
+            if mirror {
+                col.iter_mut().zip(k).for_each(|(c, k)| *c *= k.conj());
+            } else {
+                col.iter_mut().zip(k).for_each(|(c, k)| *c *= k);
             }
-        }
-    }
-}
-
-/// Blocked transpose of a `w × h` row-major matrix into `h × w`.
-fn transpose(src: &[Complex64], dst: &mut [Complex64], w: usize, h: usize) {
-    const B: usize = 32;
-    for jb in (0..h).step_by(B) {
-        for ib in (0..w).step_by(B) {
-            for j in jb..(jb + B).min(h) {
-                for i in ib..(ib + B).min(w) {
-                    dst[i * h + j] = src[j * w + i];
-                }
-            }
-        }
+        });
     }
 }
 
