@@ -1,0 +1,655 @@
+//! A G-code program as the streamer sees it: every line cleaned the way GRBL cleans it (comments and
+//! whitespace removed, letters upper-cased), classified (G-code, settings write, other `$` command), and
+//! annotated with the modal state and the tool position before and after it.
+//!
+//! The modal model is what makes a resume possible: the preamble re-sent before the resume point is the
+//! state *before* that line, and the approach goes to the line's start point. Positions are in **work
+//! coordinates, mm** (G20 programs are converted), `None` per axis while the program has not yet set it
+//! with an absolute move.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+/// GRBL 1.1's line buffer (`LINE_BUFFER_SIZE`): 80 bytes including the terminating NUL, so a block may
+/// hold at most 79 significant characters after whitespace and comments are removed.
+pub const LINE_BUFFER_BYTES: usize = 80;
+
+/// The most significant characters one block may have (see [`LINE_BUFFER_BYTES`]).
+pub const MAX_BLOCK_CHARS: usize = LINE_BUFFER_BYTES - 1;
+
+/// The largest line number GRBL accepts in an `N` word (`MAX_LINE_NUMBER`).
+pub const MAX_LINE_NUMBER: usize = 10_000_000;
+
+/// mm per inch.
+const MM_PER_INCH: f64 = 25.4;
+
+/// A program could not be read or is not streamable to GRBL.
+#[derive(Debug, thiserror::Error)]
+pub enum ProgramError {
+    /// The file could not be read.
+    #[error("cannot read program {path}: {source}")]
+    Read {
+        /// The program file.
+        path: PathBuf,
+        /// The I/O error.
+        #[source]
+        source: std::io::Error,
+    },
+    /// A block is longer than GRBL's line buffer: GRBL would answer `error:11` and skip it.
+    #[error(
+        "{path}:{line}: block has {chars} characters once cleaned (`{block}`); GRBL's line buffer \
+         holds at most {max} (LINE_BUFFER_SIZE = 80){hint}"
+    )]
+    LineTooLong {
+        /// The program file.
+        path: PathBuf,
+        /// 1-based line in the file.
+        line: usize,
+        /// Characters of the block as it would be sent.
+        chars: usize,
+        /// The limit, [`MAX_BLOCK_CHARS`].
+        max: usize,
+        /// The block as it would be sent.
+        block: String,
+        /// Extra advice (the line-number prefix added by the streamer).
+        hint: String,
+    },
+    /// A G-code word is malformed (a letter without a number, a number without a letter).
+    #[error("{path}:{line}: {what} in `{text}`")]
+    Syntax {
+        /// The program file.
+        path: PathBuf,
+        /// 1-based line in the file.
+        line: usize,
+        /// What is wrong.
+        what: String,
+        /// The source line.
+        text: String,
+    },
+    /// The program has more lines than GRBL's `N` words can number.
+    #[error("{path}: {lines} lines is more than GRBL's largest line number {max}; stream without line numbers")]
+    TooManyLines {
+        /// The program file.
+        path: PathBuf,
+        /// Lines in the file.
+        lines: usize,
+        /// [`MAX_LINE_NUMBER`].
+        max: usize,
+    },
+}
+
+/// Length units (G20/G21).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Units {
+    /// G21, millimetres (GRBL's default).
+    Mm,
+    /// G20, inches.
+    Inch,
+}
+
+/// Distance mode (G90/G91).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Distance {
+    /// G90, absolute (GRBL's default).
+    Absolute,
+    /// G91, incremental.
+    Incremental,
+}
+
+/// Motion mode (modal group 1).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum MotionMode {
+    /// G0 rapid.
+    Rapid,
+    /// G1 linear feed.
+    Linear,
+    /// G2 clockwise arc.
+    ArcCw,
+    /// G3 counter-clockwise arc.
+    ArcCcw,
+    /// G80 motion cancelled.
+    Cancel,
+}
+
+/// Spindle state (M3/M4/M5).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+pub enum Spindle {
+    /// M5.
+    Off,
+    /// M3, clockwise.
+    Cw,
+    /// M4, counter-clockwise.
+    Ccw,
+}
+
+/// The modal state GRBL keeps between blocks, as far as a resume needs it.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Modal {
+    /// G20/G21.
+    pub units: Units,
+    /// G90/G91.
+    pub distance: Distance,
+    /// G17/G18/G19 as 17, 18, 19.
+    pub plane: u8,
+    /// Group 1 motion mode.
+    pub motion: MotionMode,
+    /// Programmed feed in mm/min (`None` until an F word).
+    pub feed_mm_min: Option<f64>,
+    /// Spindle speed S (rpm).
+    pub spindle_rpm: f64,
+    /// M3/M4/M5.
+    pub spindle: Spindle,
+    /// M7 mist coolant on.
+    pub mist: bool,
+    /// M8 flood coolant on.
+    pub flood: bool,
+}
+
+impl Default for Modal {
+    /// GRBL's state after reset: `G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0`.
+    fn default() -> Self {
+        Modal {
+            units: Units::Mm,
+            distance: Distance::Absolute,
+            plane: 17,
+            motion: MotionMode::Rapid,
+            feed_mm_min: None,
+            spindle_rpm: 0.0,
+            spindle: Spindle::Off,
+            mist: false,
+            flood: false,
+        }
+    }
+}
+
+/// What kind of line this is, for the streaming protocol.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum LineKind {
+    /// Nothing left after cleaning (blank, comment, `%`): not sent.
+    Empty,
+    /// A G-code block, streamed with character counting.
+    Gcode,
+    /// A block that writes EEPROM or settings (`$x=`, `$N`, `$RST`, `G10`, `G28.1`, `G30.1`): GRBL needs
+    /// it alone in its buffer and the machine idle, so it is sent alone and waited for.
+    Setting,
+    /// Another `$` system command (`$H`, `$X`, `$C`, `$$`…), also sent alone.
+    System,
+}
+
+/// A position per axis in mm, `None` where not yet known.
+pub type Position = [Option<f64>; 3];
+
+/// One line of the program.
+#[derive(Debug, Clone)]
+pub struct Line {
+    /// 1-based line in the file (also the `N` number sent, when numbering).
+    pub number: usize,
+    /// The line as in the file.
+    pub source: String,
+    /// The cleaned block without any `N` word: what GRBL would see.
+    pub block: String,
+    /// How it is streamed.
+    pub kind: LineKind,
+    /// Modal state before the line.
+    pub before: Modal,
+    /// Modal state after the line.
+    pub after: Modal,
+    /// Tool position before the line (work coordinates, mm).
+    pub start_mm: Position,
+    /// Tool position after the line (work coordinates, mm).
+    pub end_mm: Position,
+    /// The line moves the tool (a G0–G3 with a non-zero displacement, or one whose target is unknown).
+    pub moves: bool,
+    /// The motion mode of the move, when it moves.
+    pub motion: Option<MotionMode>,
+    /// The line makes later positions unknowable to this model (G28, G30, G92, G53, G10, G38.x…).
+    pub breaks_position: bool,
+}
+
+impl Line {
+    /// The text sent for this line: the cleaned block, prefixed with `N<number>` when `numbered`.
+    #[must_use]
+    pub fn wire_text(&self, numbered: bool) -> String {
+        if numbered && self.kind == LineKind::Gcode {
+            format!("N{}{}", self.number, self.block)
+        } else {
+            self.block.clone()
+        }
+    }
+}
+
+/// A whole program, ready to stream.
+#[derive(Debug, Clone)]
+pub struct Program {
+    /// Where it was read from (for messages).
+    pub path: PathBuf,
+    /// Every line of the file, in order, including empty ones (index = number − 1).
+    pub lines: Vec<Line>,
+    /// FNV-1a 64-bit hash of the file bytes, to check on resume that the program is the same one.
+    pub fingerprint: u64,
+}
+
+/// A word of a block: a letter and its value.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Word {
+    /// Upper-case letter.
+    pub letter: char,
+    /// Its value.
+    pub value: f64,
+}
+
+/// Why a cleaned block could not be split into words; the GRBL error code is given.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub enum WordError {
+    /// GRBL `error:1`: a character where a letter was expected.
+    ExpectedLetter(char),
+    /// GRBL `error:2`: a letter without a valid number.
+    BadNumber(char),
+}
+
+impl WordError {
+    /// The GRBL 1.1 error code for it.
+    #[must_use]
+    pub fn code(&self) -> u16 {
+        match self {
+            WordError::ExpectedLetter(_) => 1,
+            WordError::BadNumber(_) => 2,
+        }
+    }
+}
+
+impl fmt::Display for WordError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            WordError::ExpectedLetter(c) => write!(f, "expected a command letter, found `{c}`"),
+            WordError::BadNumber(c) => write!(f, "word `{c}` has no valid number"),
+        }
+    }
+}
+
+/// Clean a line as GRBL's serial reader does: drop `(…)` and `;…` comments, whitespace and control
+/// characters and `/`, upper-case letters.
+#[must_use]
+pub fn clean(line: &str) -> String {
+    let mut out = String::with_capacity(line.len());
+    let mut in_paren = false;
+    for c in line.chars() {
+        if in_paren {
+            if c == ')' {
+                in_paren = false;
+            }
+            continue;
+        }
+        match c {
+            '(' => in_paren = true,
+            ';' => break,
+            '/' => {}
+            c if c <= ' ' => {}
+            c => out.push(c.to_ascii_uppercase()),
+        }
+    }
+    if out == "%" {
+        out.clear();
+    }
+    out
+}
+
+/// Split a cleaned G-code block into words, as GRBL's parser does (`read_float`: optional sign, digits,
+/// one decimal point, no exponent).
+pub fn words(block: &str) -> Result<Vec<Word>, WordError> {
+    let b = block.as_bytes();
+    let mut i = 0;
+    let mut out = Vec::new();
+    while i < b.len() {
+        let letter = b[i] as char;
+        if !letter.is_ascii_uppercase() {
+            return Err(WordError::ExpectedLetter(letter));
+        }
+        i += 1;
+        let start = i;
+        if i < b.len() && (b[i] == b'-' || b[i] == b'+') {
+            i += 1;
+        }
+        let mut digits = 0;
+        let mut dots = 0;
+        while i < b.len() && (b[i].is_ascii_digit() || b[i] == b'.') {
+            if b[i] == b'.' {
+                dots += 1;
+            } else {
+                digits += 1;
+            }
+            i += 1;
+        }
+        if digits == 0 || dots > 1 {
+            return Err(WordError::BadNumber(letter));
+        }
+        let value: f64 = block[start..i].parse().map_err(|_| WordError::BadNumber(letter))?;
+        out.push(Word { letter, value });
+    }
+    Ok(out)
+}
+
+/// FNV-1a, 64 bit: a cheap fingerprint of the program bytes (not cryptographic; it only guards against
+/// resuming a different or edited file).
+#[must_use]
+pub fn fingerprint(bytes: &[u8]) -> u64 {
+    let mut h: u64 = 0xcbf2_9ce4_8422_2325;
+    for &b in bytes {
+        h ^= u64::from(b);
+        h = h.wrapping_mul(0x0000_0100_0000_01b3);
+    }
+    h
+}
+
+impl Program {
+    /// Read and annotate a program file. `numbered`: the streamer will prefix each block with
+    /// `N<line>`, which counts against GRBL's line length.
+    pub fn read(path: &Path, numbered: bool) -> Result<Program, ProgramError> {
+        let bytes = std::fs::read(path).map_err(|source| ProgramError::Read {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let text = String::from_utf8_lossy(&bytes);
+        Program::parse(path, &text, fingerprint(&bytes), numbered)
+    }
+
+    /// Annotate program text (see [`Program::read`]); `path` is only used in messages.
+    pub fn parse(path: &Path, text: &str, fingerprint: u64, numbered: bool) -> Result<Program, ProgramError> {
+        let src: Vec<&str> = text.lines().collect();
+        if numbered && src.len() >= MAX_LINE_NUMBER {
+            return Err(ProgramError::TooManyLines {
+                path: path.to_path_buf(),
+                lines: src.len(),
+                max: MAX_LINE_NUMBER,
+            });
+        }
+        let mut modal = Modal::default();
+        let mut pos: Position = [None; 3];
+        let mut lines = Vec::with_capacity(src.len());
+        for (i, s) in src.iter().enumerate() {
+            let number = i + 1;
+            let syntax = |what: String| ProgramError::Syntax {
+                path: path.to_path_buf(),
+                line: number,
+                what,
+                text: (*s).to_string(),
+            };
+            let cleaned = clean(s);
+            let (kind, block) = if cleaned.is_empty() {
+                (LineKind::Empty, cleaned)
+            } else if cleaned.starts_with('$') {
+                let setting = cleaned.contains('=') || cleaned.starts_with("$N") || cleaned.starts_with("$RST");
+                let jog = cleaned.starts_with("$J=");
+                let kind = if jog {
+                    LineKind::Gcode
+                } else if setting {
+                    LineKind::Setting
+                } else {
+                    LineKind::System
+                };
+                (kind, cleaned)
+            } else {
+                let ws = words(&cleaned).map_err(|e| syntax(e.to_string()))?;
+                let block: String = strip_n(&cleaned, &ws);
+                let setting = ws
+                    .iter()
+                    .any(|w| w.letter == 'G' && (same(w.value, 10.0) || same(w.value, 28.1) || same(w.value, 30.1)));
+                (if setting { LineKind::Setting } else { LineKind::Gcode }, block)
+            };
+            let mut line = Line {
+                number,
+                source: (*s).to_string(),
+                block,
+                kind,
+                before: modal,
+                after: modal,
+                start_mm: pos,
+                end_mm: pos,
+                moves: false,
+                motion: None,
+                breaks_position: false,
+            };
+            if kind == LineKind::Gcode && !line.block.starts_with('$') {
+                let ws = words(&line.block).map_err(|e| syntax(e.to_string()))?;
+                apply(&ws, &mut modal, &mut pos, &mut line);
+                line.end_mm = pos;
+                line.after = modal;
+            } else if kind == LineKind::System && (line.block == "$H" || line.block.starts_with("$J")) {
+                line.breaks_position = true;
+                pos = [None; 3];
+                line.end_mm = pos;
+            }
+            if kind != LineKind::Empty {
+                let chars = line.wire_text(numbered).len();
+                if chars > MAX_BLOCK_CHARS {
+                    let hint = if line.block.len() <= MAX_BLOCK_CHARS {
+                        format!("; without the `N{number}` prefix it would fit: stream with line numbers off")
+                    } else {
+                        String::new()
+                    };
+                    return Err(ProgramError::LineTooLong {
+                        path: path.to_path_buf(),
+                        line: number,
+                        chars,
+                        max: MAX_BLOCK_CHARS,
+                        block: line.wire_text(numbered),
+                        hint,
+                    });
+                }
+            }
+            lines.push(line);
+        }
+        Ok(Program {
+            path: path.to_path_buf(),
+            lines,
+            fingerprint,
+        })
+    }
+
+    /// Lines that will be sent (non-empty).
+    pub fn sendable(&self) -> impl Iterator<Item = &Line> {
+        self.lines.iter().filter(|l| l.kind != LineKind::Empty)
+    }
+
+    /// The line with 1-based number `n`.
+    #[must_use]
+    pub fn line(&self, n: usize) -> Option<&Line> {
+        n.checked_sub(1).and_then(|i| self.lines.get(i))
+    }
+}
+
+fn same(a: f64, b: f64) -> bool {
+    (a - b).abs() < 1e-6
+}
+
+/// Remove an `N` word from a cleaned block (the streamer numbers lines itself).
+fn strip_n(cleaned: &str, ws: &[Word]) -> String {
+    if !ws.iter().any(|w| w.letter == 'N') {
+        return cleaned.to_string();
+    }
+    let b = cleaned.as_bytes();
+    let mut out = String::new();
+    let mut i = 0;
+    while i < b.len() {
+        let start = i;
+        i += 1;
+        while i < b.len() && !b[i].is_ascii_uppercase() {
+            i += 1;
+        }
+        if b[start] != b'N' {
+            out.push_str(&cleaned[start..i]);
+        }
+    }
+    out
+}
+
+/// Apply a block's words to the modal state and position (the model, not a validator: GRBL checks).
+fn apply(ws: &[Word], modal: &mut Modal, pos: &mut Position, line: &mut Line) {
+    let scale = |m: &Modal| if m.units == Units::Inch { MM_PER_INCH } else { 1.0 };
+    let mut axis: [Option<f64>; 3] = [None; 3];
+    let mut motion_word = None;
+    let mut non_modal_motion = false;
+    for w in ws {
+        match w.letter {
+            'G' => {
+                let g = w.value;
+                if same(g, 0.0) {
+                    motion_word = Some(MotionMode::Rapid);
+                } else if same(g, 1.0) {
+                    motion_word = Some(MotionMode::Linear);
+                } else if same(g, 2.0) {
+                    motion_word = Some(MotionMode::ArcCw);
+                } else if same(g, 3.0) {
+                    motion_word = Some(MotionMode::ArcCcw);
+                } else if same(g, 80.0) {
+                    motion_word = Some(MotionMode::Cancel);
+                } else if same(g, 17.0) || same(g, 18.0) || same(g, 19.0) {
+                    modal.plane = g.round() as u8;
+                } else if same(g, 20.0) {
+                    modal.units = Units::Inch;
+                } else if same(g, 21.0) {
+                    modal.units = Units::Mm;
+                } else if same(g, 90.0) {
+                    modal.distance = Distance::Absolute;
+                } else if same(g, 91.0) {
+                    modal.distance = Distance::Incremental;
+                } else if same(g, 28.0) || same(g, 30.0) || same(g, 53.0) || same(g, 92.0) || (38.0..39.0).contains(&g)
+                {
+                    non_modal_motion = true;
+                } else if same(g, 92.1) || same(g, 43.1) || same(g, 49.0) {
+                    line.breaks_position = true;
+                }
+            }
+            'M' => {
+                let m = w.value.round() as i64;
+                match m {
+                    3 => modal.spindle = Spindle::Cw,
+                    4 => modal.spindle = Spindle::Ccw,
+                    5 => modal.spindle = Spindle::Off,
+                    7 => modal.mist = true,
+                    8 => modal.flood = true,
+                    9 => {
+                        modal.mist = false;
+                        modal.flood = false;
+                    }
+                    2 | 30 => {
+                        let keep_feed = modal.feed_mm_min;
+                        *modal = Modal {
+                            units: modal.units,
+                            feed_mm_min: keep_feed,
+                            spindle_rpm: modal.spindle_rpm,
+                            ..Modal::default()
+                        };
+                        modal.motion = MotionMode::Linear;
+                    }
+                    _ => {}
+                }
+            }
+            'X' => axis[0] = Some(w.value),
+            'Y' => axis[1] = Some(w.value),
+            'Z' => axis[2] = Some(w.value),
+            _ => {}
+        }
+    }
+    // F and S after units are settled (a block may carry G20 and F together).
+    for w in ws {
+        match w.letter {
+            'F' => modal.feed_mm_min = Some(w.value * scale(modal)),
+            'S' => modal.spindle_rpm = w.value,
+            _ => {}
+        }
+    }
+    if let Some(m) = motion_word {
+        modal.motion = m;
+    }
+    let has_axis = axis.iter().any(Option::is_some);
+    if non_modal_motion {
+        line.breaks_position = true;
+        line.moves = true;
+        *pos = [None; 3];
+        return;
+    }
+    if !has_axis || modal.motion == MotionMode::Cancel {
+        return;
+    }
+    let k = scale(modal);
+    let mut target = *pos;
+    for i in 0..3 {
+        if let Some(v) = axis[i] {
+            target[i] = match modal.distance {
+                Distance::Absolute => Some(v * k),
+                Distance::Incremental => pos[i].map(|p| p + v * k),
+            };
+        }
+    }
+    let displaced = (0..3).any(|i| match (pos[i], target[i]) {
+        (Some(a), Some(b)) => (a - b).abs() > 1e-9,
+        (None, None) => axis[i].is_some(),
+        _ => true,
+    });
+    line.motion = Some(modal.motion);
+    line.moves = displaced;
+    *pos = target;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn prog(text: &str) -> Program {
+        Program::parse(Path::new("t.nc"), text, 0, true).unwrap()
+    }
+
+    #[test]
+    fn cleans_like_grbl() {
+        assert_eq!(clean("g1 x1.5 (move) y2 ; tail"), "G1X1.5Y2");
+        assert_eq!(clean("%"), "");
+        assert_eq!(clean("  (only a comment)"), "");
+    }
+
+    #[test]
+    fn words_report_grbl_codes() {
+        assert_eq!(words("G1X-1.5").unwrap().len(), 2);
+        assert_eq!(words("1X").unwrap_err().code(), 1);
+        assert_eq!(words("GX1").unwrap_err().code(), 2);
+        assert_eq!(words("X1.2.3").unwrap_err().code(), 2);
+    }
+
+    #[test]
+    fn tracks_modal_state_and_position() {
+        let p = prog("G21 G90\nG0 X1 Y2 Z3\nM3 S1000\nG1 Z-1 F200\nG91 X1\nG20 G1 X1 F10\n");
+        let l = &p.lines;
+        assert_eq!(l[1].end_mm, [Some(1.0), Some(2.0), Some(3.0)]);
+        assert!(l[1].moves && !l[2].moves);
+        assert_eq!(l[3].before.spindle, Spindle::Cw);
+        assert_eq!(l[3].end_mm[2], Some(-1.0));
+        assert_eq!(l[4].end_mm[0], Some(2.0));
+        assert!((l[5].end_mm[0].unwrap() - 27.4).abs() < 1e-9);
+        assert_eq!(l[5].before.feed_mm_min, Some(200.0));
+        assert!((p.lines[5].end_mm[0].unwrap() - (2.0 + 25.4)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn settings_and_line_numbers() {
+        let p = prog("N10 G1 X1 F100\n$110=500\nG10 L2 P1 X0\n$H\n");
+        assert_eq!(p.lines[0].block, "G1X1F100");
+        assert_eq!(p.lines[0].wire_text(true), "N1G1X1F100");
+        assert_eq!(p.lines[1].kind, LineKind::Setting);
+        assert_eq!(p.lines[2].kind, LineKind::Setting);
+        assert_eq!(p.lines[3].kind, LineKind::System);
+        assert!(p.lines[3].breaks_position);
+    }
+
+    #[test]
+    fn long_line_is_refused_with_its_number() {
+        let long = format!("G1X1F100\nG1 X{}\n", "1".repeat(80));
+        let e = Program::parse(Path::new("p.nc"), &long, 0, true).unwrap_err();
+        let msg = e.to_string();
+        assert!(msg.contains("p.nc:2") && msg.contains("79"), "{msg}");
+        // 79 significant characters fit alone but not with the N1 prefix.
+        let edge = format!("G1X{}\n", "1".repeat(76));
+        let e = Program::parse(Path::new("p.nc"), &edge, 0, true).unwrap_err();
+        assert!(e.to_string().contains("line numbers off"), "{e}");
+        assert!(Program::parse(Path::new("p.nc"), &edge, 0, false).is_ok());
+    }
+}
