@@ -87,16 +87,14 @@ impl RealFft2 {
     }
 
     /// `out = IFFT2(H ⊙ FFT2(in)) / (nx·ny)`, where `h(kx, column)` multiplies column `kx` of the spectrum
-    /// in place (`column[ky]`). The input is `rows × cols` (zero-padded), the output the top-left
-    /// `out_rows × out_cols` of the result.
+    /// in place (`column[ky]`). The input is `(cols, rows)` (zero-padded), the output the top-left
+    /// `(out_cols, out_rows)` of the result.
     pub fn filter<H>(
         &mut self,
         input: &[f64],
-        cols: usize,
-        rows: usize,
+        (cols, rows): (usize, usize),
         out: &mut [f64],
-        out_cols: usize,
-        out_rows: usize,
+        (out_cols, out_rows): (usize, usize),
         h: H,
     ) where
         H: Fn(usize, &mut [Complex64]) + Sync,
@@ -196,7 +194,7 @@ mod tests {
         let input: Vec<f64> = (0..nx * ny).map(|k| (k as f64 * 0.37).sin()).collect();
         let mut f = RealFft2::new(nx, ny);
         let mut out = vec![0.0; nx * ny];
-        f.filter(&input, nx, ny, &mut out, nx, ny, |_, _| {});
+        f.filter(&input, (nx, ny), &mut out, (nx, ny), |_, _| {});
         let err = input.iter().zip(&out).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(err < 1e-12, "{err}");
     }

@@ -21,8 +21,10 @@
 #![warn(missing_docs)]
 
 pub mod brdf;
+pub mod facets;
 pub mod fft2;
 pub mod geometry;
+pub mod heightfield;
 pub mod io;
 pub mod ndf;
 pub mod npy;

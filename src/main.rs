@@ -19,6 +19,9 @@ enum Command {
     /// BRDF → target NDF in slope space (half-angle distribution, Lucy–Richardson deconvolution of the base
     /// lobe, mean tilt removed). Writes ndf.json and optionally a PNG.
     Ndf(cli::ndf::Args),
+    /// Target NDF → a tileable facet heightfield: CVT sampling, annealed arrangement, periodic Poisson
+    /// integration. Writes DIR/tile.json, tile.npy, tile.png and tile.stl.
+    Facets(cli::facets::Args),
     /// Stream a G-code program to a GRBL 1.1 controller over a serial port (character counting, journal,
     /// resume, check mode, feed hold on Ctrl-C).
     Stream(cli::stream::Args),
@@ -30,6 +33,7 @@ fn main() {
     let cli = Cli::parse();
     let result: Result<()> = match cli.command {
         Command::Ndf(a) => cli::ndf::run(&a),
+        Command::Facets(a) => cli::facets::run(&a),
         Command::Stream(a) => cli::stream::run(&a),
         Command::Emulate(a) => cli::emulate::run(&a),
     };

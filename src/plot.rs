@@ -4,7 +4,7 @@
 //! fonts need no font files on the user's machine); colour maps from `colorous`; PNG encoding from `png`.
 
 use embedded_graphics::{
-    mono_font::{ascii::FONT_6X10, MonoTextStyle},
+    mono_font::{iso_8859_1::FONT_6X10, MonoTextStyle},
     pixelcolor::Rgb888,
     prelude::*,
     primitives::{Line, PrimitiveStyle, Rectangle},
@@ -152,8 +152,11 @@ pub struct Heatmap<'a> {
     pub value_label: String,
     /// Colour scale.
     pub scale: Scale,
-    /// Side of the square plot area in pixels.
+    /// Side of the square plot area in pixels (the longer side when the extents are not square).
     pub plot_px: u32,
+    /// Pixel colours to show instead of the colour-mapped values (e.g. a shaded relief tinted by height);
+    /// the colour bar still maps `values`.
+    pub rgb: Option<&'a [[u8; 3]]>,
 }
 
 /// "Nice" tick positions covering `[lo, hi]` with about `n` ticks.
@@ -199,9 +202,20 @@ pub fn viridis(t: f64) -> [u8; 3] {
 impl Heatmap<'_> {
     /// Render to a canvas.
     pub fn render(&self) -> Canvas {
-        let p = self.plot_px as i32;
+        let (wx, wy) = (self.x_range.1 - self.x_range.0, self.y_range.1 - self.y_range.0);
+        let (pw, ph) = if wx >= wy {
+            (
+                self.plot_px as i32,
+                ((self.plot_px as f64 * wy / wx).round() as i32).max(16),
+            )
+        } else {
+            (
+                ((self.plot_px as f64 * wx / wy).round() as i32).max(16),
+                self.plot_px as i32,
+            )
+        };
         let (left, top, right, bottom) = (70, 28, 110, 44);
-        let mut cv = Canvas::new((left + p + right) as u32, (top + p + bottom) as u32);
+        let mut cv = Canvas::new((left + pw + right) as u32, (top + ph + bottom) as u32);
         let finite: Vec<f64> = self.values.iter().copied().filter(|v| v.is_finite()).collect();
         let vmax = finite.iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let vmin = finite.iter().copied().fold(f64::INFINITY, f64::min);
@@ -225,49 +239,49 @@ impl Heatmap<'_> {
             }
         };
         // the map
-        for py in 0..p {
-            let fy = 1.0 - (py as f64 + 0.5) / p as f64;
+        for py in 0..ph {
+            let fy = 1.0 - (py as f64 + 0.5) / ph as f64;
             let j = ((fy * self.ny as f64) as usize).min(self.ny - 1);
-            for px in 0..p {
-                let fx = (px as f64 + 0.5) / p as f64;
+            for px in 0..pw {
+                let fx = (px as f64 + 0.5) / pw as f64;
                 let i = ((fx * self.nx as f64) as usize).min(self.nx - 1);
                 let v = self.values[j * self.nx + i];
-                let c = if v.is_finite() {
-                    viridis(map(v))
-                } else {
-                    [200, 200, 200]
+                let c = match self.rgb {
+                    Some(rgb) => rgb[j * self.nx + i],
+                    None if v.is_finite() => viridis(map(v)),
+                    None => [200, 200, 200],
                 };
                 cv.put((left + px) as i64, (top + py) as i64, c);
             }
         }
-        cv.frame(left - 1, top - 1, (p + 2) as u32, (p + 2) as u32);
+        cv.frame(left - 1, top - 1, (pw + 2) as u32, (ph + 2) as u32);
         // axes and ticks
         let (x0, x1) = self.x_range;
         let (y0, y1) = self.y_range;
         for t in nice_ticks(x0, x1, 6) {
-            let px = left + ((t - x0) / (x1 - x0) * p as f64).round() as i32;
-            cv.line(px, top + p, px, top + p + 4);
-            cv.text(px, top + p + 14, &fmt_tick(t), Alignment::Center);
+            let px = left + ((t - x0) / (x1 - x0) * pw as f64).round() as i32;
+            cv.line(px, top + ph, px, top + ph + 4);
+            cv.text(px, top + ph + 14, &fmt_tick(t), Alignment::Center);
         }
         for t in nice_ticks(y0, y1, 6) {
-            let py = top + p - ((t - y0) / (y1 - y0) * p as f64).round() as i32;
+            let py = top + ph - ((t - y0) / (y1 - y0) * ph as f64).round() as i32;
             cv.line(left - 5, py, left - 1, py);
             cv.text(left - 7, py + 3, &fmt_tick(t), Alignment::Right);
         }
-        cv.text(left + p / 2, top + p + 30, &self.x_label, Alignment::Center);
+        cv.text(left + pw / 2, top + ph + 30, &self.x_label, Alignment::Center);
         cv.text(4, top - 8, &self.y_label, Alignment::Left);
-        cv.text(left + p / 2, 14, &self.title, Alignment::Center);
+        cv.text(left + pw / 2, 14, &self.title, Alignment::Center);
         // colour bar
-        let (bx, bw) = (left + p + 16, 14);
-        for py in 0..p {
-            let t = 1.0 - (py as f64 + 0.5) / p as f64;
+        let (bx, bw) = (left + pw + 16, 14);
+        for py in 0..ph {
+            let t = 1.0 - (py as f64 + 0.5) / ph as f64;
             for px in 0..bw {
                 cv.put((bx + px) as i64, (top + py) as i64, viridis(t));
             }
         }
-        cv.frame(bx - 1, top - 1, (bw + 2) as u32, (p + 2) as u32);
+        cv.frame(bx - 1, top - 1, (bw + 2) as u32, (ph + 2) as u32);
         for t in nice_ticks(lo, hi, 5) {
-            let py = top + p - ((t - lo) / (hi - lo) * p as f64).round() as i32;
+            let py = top + ph - ((t - lo) / (hi - lo) * ph as f64).round() as i32;
             cv.line(bx + bw, py, bx + bw + 3, py);
             let label = match self.scale {
                 Scale::Log { .. } => format!("1e{}", t.round() as i64),
@@ -307,6 +321,7 @@ mod tests {
             value_label: "v".into(),
             scale: Scale::Log { decades: 4.0 },
             plot_px: 100,
+            rgb: None,
         };
         let cv = h.render();
         let png = cv.to_png();

@@ -75,7 +75,7 @@ impl Convolver {
         assert_eq!(out.len(), nx * ny);
         let py = self.fft.size().1;
         let kernel = &self.kernel;
-        self.fft.filter(input, nx, ny, out, nx, ny, |kx, col| {
+        self.fft.filter(input, (nx, ny), out, (nx, ny), |kx, col| {
             let k = &kernel[kx * py..(kx + 1) * py];
             if mirror {
                 col.iter_mut().zip(k).for_each(|(c, k)| *c *= k.conj());

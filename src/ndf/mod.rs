@@ -270,6 +270,7 @@ pub fn render_png(grid: &SlopeGrid, title: &str) -> crate::plot::Canvas {
         value_label: "P22 (log)".into(),
         scale: crate::plot::Scale::Log { decades: 4.0 },
         plot_px: 384,
+        rgb: None,
     }
     .render()
 }
