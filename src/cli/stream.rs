@@ -1,10 +1,139 @@
-//! `brdfmill stream` (being built: see issue "Streaming to a GRBL mill").
+//! `brdfmill stream`: send a G-code program to a GRBL 1.1 controller (see `docs/STREAM.md`).
+
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::{bail, Context, Result};
+use brdfmill::stream::program::Program;
+use brdfmill::stream::serial::{SerialLink, DEFAULT_BAUD};
+use brdfmill::stream::session::{self, Config, Mode, Observer, Outcome, Progress};
 
 /// Arguments of `brdfmill stream`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The G-code program.
+    pub program: PathBuf,
+    /// Serial port of the controller (e.g. /dev/ttyUSB0, or the path `brdfmill emulate` prints).
+    #[arg(long)]
+    pub port: PathBuf,
+    /// Serial speed, bits/s (8N1).
+    #[arg(long, default_value_t = DEFAULT_BAUD)]
+    pub baud: u32,
+    /// Run the whole program in GRBL's $C check mode first; stream only if it has no error.
+    #[arg(long)]
+    pub check: bool,
+    /// Journal file [default: PROGRAM.journal.jsonl].
+    #[arg(long)]
+    pub journal: Option<PathBuf>,
+    /// Resume the interrupted job recorded in the journal.
+    #[arg(long)]
+    pub resume: bool,
+    /// Report `error:N` and carry on instead of stopping the job.
+    #[arg(long)]
+    pub continue_on_error: bool,
+    /// Safe height for the resume approach (work Z, mm).
+    #[arg(long, default_value_t = 5.0)]
+    pub safe_z_mm: f64,
+    /// Spindle spin-up dwell on resume (s).
+    #[arg(long, default_value_t = 2.0)]
+    pub spindle_dwell_s: f64,
+    /// Plunge feed on resume when the program has no feed rate there yet (mm/min).
+    #[arg(long, default_value_t = 100.0)]
+    pub plunge_feed_mm_min: f64,
+    /// On resume, unlock ($X) a controller in alarm even when the journal does not show the position was kept.
+    #[arg(long)]
+    pub unlock: bool,
+    /// Do not prefix blocks with N line numbers (status reports then cannot name the executing line).
+    #[arg(long)]
+    pub no_line_numbers: bool,
+}
+
+struct Bar {
+    bar: indicatif::ProgressBar,
+}
+
+impl Observer for Bar {
+    fn progress(&mut self, p: &Progress) {
+        self.bar.set_length(p.lines_total as u64);
+        self.bar.set_position(p.lines_done as u64);
+        let state = p.state.map_or("?".to_string(), |s| s.to_string());
+        let pos = p
+            .position_mm
+            .map_or(String::new(), |q| format!(" X{:.3} Y{:.3} Z{:.3}", q[0], q[1], q[2]));
+        let eta = p.eta.map_or(String::new(), |e| format!(" ETA {}s", e.as_secs()));
+        self.bar.set_message(format!("{state}{pos}{eta}"));
+    }
+    fn note(&mut self, msg: &str) {
+        self.bar.println(msg);
+    }
+}
 
 /// Run the subcommand.
-pub fn run(_a: &Args) -> anyhow::Result<()> {
-    anyhow::bail!("`brdfmill stream` is not available in this build yet")
+pub fn run(a: &Args) -> Result<()> {
+    let journal = a.journal.clone().unwrap_or_else(|| {
+        let mut p = a.program.clone().into_os_string();
+        p.push(".journal.jsonl");
+        PathBuf::from(p)
+    });
+    // Everything about the program is checked before the port is touched.
+    let program = Program::read(&a.program, !a.no_line_numbers)?;
+    let cfg = Config {
+        number_lines: !a.no_line_numbers,
+        check_first: a.check,
+        continue_on_error: a.continue_on_error,
+        safe_z_mm: a.safe_z_mm,
+        spindle_dwell_s: a.spindle_dwell_s,
+        plunge_feed_mm_min: a.plunge_feed_mm_min,
+        unlock: a.unlock,
+        ..Config::default()
+    };
+    if !(cfg.safe_z_mm.is_finite() && cfg.spindle_dwell_s >= 0.0 && cfg.plunge_feed_mm_min > 0.0) {
+        bail!("--safe-z-mm must be finite, --spindle-dwell-s ≥ 0 and --plunge-feed-mm-min > 0");
+    }
+    let mut link = SerialLink::open(&a.port, a.baud)?;
+    let stop = Arc::new(AtomicBool::new(false));
+    {
+        let stop = Arc::clone(&stop);
+        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)).context("cannot install the Ctrl-C handler")?;
+    }
+    let bar = indicatif::ProgressBar::new(program.sendable().count() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} lines {msg}")
+            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+    );
+    bar.enable_steady_tick(Duration::from_millis(250));
+    let mut obs = Bar { bar };
+    let mode = if a.resume { Mode::Resume } else { Mode::Fresh };
+    let outcome = session::run(&mut link, &program, &cfg, &journal, mode, &mut obs, &stop);
+    obs.bar.finish_and_clear();
+    match outcome? {
+        Outcome::Completed(s) => {
+            let secs = s.streaming_time.as_secs_f64().max(1e-9);
+            println!(
+                "done: {} lines, {} bytes in {:.1} s ({:.0} bytes/s); journal {}",
+                s.lines_sent,
+                s.bytes_sent,
+                secs,
+                s.bytes_sent as f64 / secs,
+                journal.display()
+            );
+            Ok(())
+        }
+        Outcome::Stopped(r, _) => {
+            let at = r.line.map_or(String::new(), |l| format!(" at line {l}"));
+            let resume = match (r.located, r.resume_line) {
+                (true, Some(l)) => format!(
+                    "; {} lines done, resume from line {l} with: brdfmill stream {} --port {} --resume",
+                    r.lines_done,
+                    a.program.display(),
+                    a.port.display()
+                ),
+                (false, _) => "; which lines ran is not known yet: --resume will read the controller's position".into(),
+                _ => String::new(),
+            };
+            bail!("job stopped{at}: {}{resume} (journal {})", r.message, journal.display())
+        }
+    }
 }

@@ -575,7 +575,7 @@ impl Controller {
     /// Ctrl-X: stop, flush the receive buffer and planner, reset the parser, print the banner. A reset while
     /// moving or holding raises `ALARM:3` (GRBL's `mc_reset`).
     fn soft_reset(&mut self) {
-        let moving = (self.state == State::Run || self.hold) && !self.planner.is_empty();
+        let moving = (self.state == State::Run || self.hold) && !self.planner.is_empty() && !self.critical;
         self.flush_motion();
         self.rx.clear();
         self.line.clear();
@@ -599,7 +599,10 @@ impl Controller {
 
     /// Stop at once and lock with `ALARM:code` until a soft reset (soft-limit behaviour).
     fn alarm(&mut self, code: u16) {
-        self.flush_motion();
+        // Motion stops here; the planner is only cleared by the reset that ends the lock, so status
+        // reports until then still name the block that was executing (`Ln`), as in GRBL.
+        self.hold = false;
+        self.waiting = None;
         self.state = State::Alarm;
         self.critical = true;
         self.say(&format!("ALARM:{code}"));
@@ -1219,13 +1222,14 @@ impl Pacer {
         }
     }
 
+    /// Bytes were queued on an idle line at `now`: the first one finishes crossing one byte time later.
+    fn arrive(&mut self, now: Instant) {
+        self.next_free = self.next_free.max(now);
+    }
+
     /// How many of `waiting` bytes have finished crossing the line by `now`.
     fn take(&mut self, now: Instant, waiting: usize) -> usize {
-        if waiting == 0 {
-            self.next_free = self.next_free.max(now);
-            return 0;
-        }
-        if now < self.next_free + self.byte_time {
+        if waiting == 0 || now < self.next_free + self.byte_time {
             return 0;
         }
         let n = ((now - self.next_free).as_secs_f64() / self.byte_time.as_secs_f64()) as usize;
@@ -1396,7 +1400,12 @@ fn run_link(
             let rev = fds[0].revents().unwrap_or(PollFlags::empty());
             if n > 0 && rev.contains(PollFlags::POLLIN) {
                 match nix::unistd::read(p.master.as_raw_fd(), &mut buf) {
-                    Ok(k) => wire_in.extend(&buf[..k]),
+                    Ok(k) => {
+                        if wire_in.is_empty() {
+                            pace_in.arrive(Instant::now());
+                        }
+                        wire_in.extend(&buf[..k]);
+                    }
                     Err(nix::errno::Errno::EAGAIN) => {}
                     Err(_) => hung_up = true,
                 }
@@ -1415,7 +1424,11 @@ fn run_link(
             ctl.receive(b);
         }
         ctl.advance(dt * cfg.time_scale);
-        wire_out.extend(ctl.take_output());
+        let fresh_out = ctl.take_output();
+        if wire_out.is_empty() && !fresh_out.is_empty() {
+            pace_out.arrive(now);
+        }
+        wire_out.extend(fresh_out);
         if ctl.take_disconnect() {
             ctl.link_lost();
             wire_in.clear();
@@ -1595,8 +1608,8 @@ mod tests {
     #[test]
     fn pacer_keeps_the_baud_rate() {
         let mut p = Pacer::new(115_200);
-        let t0 = Instant::now();
-        p.next_free = t0;
+        let t0 = Instant::now() + Duration::from_millis(5);
+        p.arrive(t0);
         assert_eq!(p.take(t0, 100), 0);
         assert_eq!(p.take(t0 + Duration::from_millis(1), 100), 11);
         assert_eq!(p.take(t0 + Duration::from_millis(10), 1000), 115 - 11);

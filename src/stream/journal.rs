@@ -96,7 +96,7 @@ pub enum Record {
 #[derive(Debug, thiserror::Error)]
 pub enum JournalError {
     /// I/O on the journal file.
-    #[error("journal {path}: {source}")]
+    #[error("journal {path}")]
     Io {
         /// The journal.
         path: PathBuf,

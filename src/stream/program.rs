@@ -27,7 +27,7 @@ const MM_PER_INCH: f64 = 25.4;
 #[derive(Debug, thiserror::Error)]
 pub enum ProgramError {
     /// The file could not be read.
-    #[error("cannot read program {path}: {source}")]
+    #[error("cannot read program {path}")]
     Read {
         /// The program file.
         path: PathBuf,

@@ -21,7 +21,7 @@ pub trait Link {
 
 /// The serial port could not be opened.
 #[derive(Debug, thiserror::Error)]
-#[error("cannot open serial port {path} at {baud} baud: {source}")]
+#[error("cannot open serial port {path} at {baud} baud")]
 pub struct OpenError {
     /// The port.
     pub path: PathBuf,

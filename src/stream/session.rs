@@ -179,7 +179,7 @@ pub enum StreamError {
         saw: String,
     },
     /// The link failed outside streaming.
-    #[error("{port}: {what}: {source}")]
+    #[error("{port}: {what}")]
     Link {
         /// The port.
         port: String,
@@ -433,6 +433,11 @@ pub fn run(
                 }
                 st.partial = loc.partial;
             }
+            if program.sendable().all(|l| st.executed.contains(&l.number)) {
+                // The controller finished everything before the fault was noticed.
+                j.record_synced(&Record::Complete)?;
+                return Ok(Outcome::Completed(Stats::default()));
+            }
             let (first, queue) = plan_resume(program, &st, cfg).map_err(|what| StreamError::Resume {
                 journal: journal_path.to_path_buf(),
                 what,
@@ -551,7 +556,12 @@ impl Session<'_> {
         let mut got_opt = false;
         let mut reset_sent = false;
         let mut first_status_at: Option<Instant> = None;
+        let mut resend_at: Option<Instant> = None;
         loop {
+            if resend_at.is_some_and(|t| Instant::now() >= t) {
+                resend_at = None;
+                probe_sent = false;
+            }
             if self.stop.load(Ordering::SeqCst) {
                 return Err(StreamError::Interrupted);
             }
@@ -585,10 +595,12 @@ impl Session<'_> {
             };
             match parse_response(&line) {
                 Response::Banner(_) => {
-                    // A (re)start: whatever was sent before is gone; ask again.
+                    // A (re)start — or a banner printed before the port was opened. If the probe was lost
+                    // in a reset, ask again, but only once it is clear no answer is coming: a second `$I`
+                    // whose `ok` arrived during streaming would be taken for a program line's.
                     got_ver = false;
                     got_opt = false;
-                    probe_sent = false;
+                    resend_at = Some(Instant::now() + Duration::from_millis(1500));
                 }
                 Response::Feedback(f) if f.starts_with("VER:") => {
                     if !f.starts_with("VER:1.1") {
@@ -599,6 +611,7 @@ impl Session<'_> {
                         });
                     }
                     got_ver = true;
+                    resend_at = None;
                 }
                 Response::Feedback(f) if f.starts_with("OPT:") => {
                     let parts: Vec<&str> = f[4..].split(',').collect();
@@ -1111,12 +1124,9 @@ impl Session<'_> {
                     };
                     let ln = stopped.as_ref().and_then(|s| s.line);
                     let p = after.as_ref().or(stopped.as_ref()).and_then(|s| self.work_position(s));
-                    let candidates: Vec<usize> = self
-                        .sent
-                        .iter()
-                        .copied()
-                        .filter(|n| !self.executed.contains(n) && !self.errors.contains(n))
-                        .collect();
+                    // Only planned lines (answered `ok`) can have run: the rest were flushed by the reset
+                    // or, at an alarm, never parsed.
+                    let candidates: Vec<usize> = self.planned.iter().copied().collect();
                     match p {
                         Some(p) => match locate(self.program, &candidates, ln, p, self.cfg.position_tolerance_mm) {
                             Ok(loc) => {
@@ -1196,6 +1206,7 @@ impl Session<'_> {
                     Response::Ok => {
                         if let Some(Tag::Line(n)) = self.counter.answered() {
                             let _ = self.journal(&Record::Ok { line: n });
+                            self.planned.push_back(n);
                         }
                     }
                     Response::Error(code) => {
@@ -1238,6 +1249,7 @@ impl Session<'_> {
                     Response::Ok => {
                         if let Some(Tag::Line(n)) = self.counter.answered() {
                             let _ = self.journal(&Record::Ok { line: n });
+                            self.planned.push_back(n);
                         }
                     }
                     Response::Error(code) => {
@@ -1313,15 +1325,45 @@ pub fn locate(
     p: [f64; 3],
     tol: f64,
 ) -> Result<Located, String> {
-    let mut cands: Vec<usize> = candidates.to_vec();
-    let mut pre = Vec::new();
-    if let Some(ln) = ln {
-        let ln = ln as usize;
-        if cands.contains(&ln) {
-            pre = cands.iter().copied().filter(|&n| n < ln).collect();
-            cands.retain(|&n| n >= ln);
-            cands.truncate(1);
+    let cands: Vec<usize> = candidates.to_vec();
+    let pre = Vec::new();
+    if let Some(ln) = ln.map(|l| l as usize).filter(|l| cands.contains(l)) {
+        // The controller names the line: every candidate before it ran; where on it motion stopped
+        // decides between complete, not started and cut (which needs no known start point).
+        let mut executed: Vec<usize> = cands.iter().copied().filter(|&n| n < ln).collect();
+        let l = program
+            .line(ln)
+            .ok_or_else(|| format!("line {ln} is not in the program"))?;
+        let (start, end) = (known(l.start_mm), known(l.end_mm));
+        if !l.moves || end.is_some_and(|b| dist(b, p) <= tol) {
+            executed.push(ln);
+            return Ok(Located {
+                executed,
+                partial: None,
+            });
         }
+        if start.is_some_and(|a| dist(a, p) <= tol) {
+            return Ok(Located {
+                executed,
+                partial: None,
+            });
+        }
+        if let (Some(a), Some(b)) = (start, end) {
+            let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
+            let len2 = d[0] * d[0] + d[1] * d[1] + d[2] * d[2];
+            let t = ((p[0] - a[0]) * d[0] + (p[1] - a[1]) * d[1] + (p[2] - a[2]) * d[2]) / len2;
+            let q = [a[0] + t * d[0], a[1] + t * d[1], a[2] + t * d[2]];
+            if dist(q, p) > tol || !(0.0..=1.0).contains(&t) {
+                return Err(format!(
+                    "the controller reports line {ln} executing but the stop position ({:.3}, {:.3}, {:.3}) is not on it",
+                    p[0], p[1], p[2]
+                ));
+            }
+        }
+        return Ok(Located {
+            executed,
+            partial: Some((ln, p)),
+        });
     }
     // Progress = (index, fraction): candidates[..index] complete, candidates[index] done up to fraction.
     let mut consistent: Vec<(usize, f64)> = Vec::new();
@@ -1340,16 +1382,16 @@ pub fn locate(
             }
             continue;
         }
-        let (Some(a), Some(b)) = (known(l.start_mm), known(l.end_mm)) else {
-            return Err(format!(
-                "line {n}'s start or end position is unknown to the program model"
-            ));
+        let Some(b) = known(l.end_mm) else {
+            return Err(format!("line {n}'s end position is unknown to the program model"));
         };
-        if dist(a, p) <= tol {
-            consistent.push((i, 0.0));
-        }
         if dist(b, p) <= tol {
             consistent.push((i + 1, 0.0));
+        }
+        // From an unknown start only the end can be recognised.
+        let Some(a) = known(l.start_mm) else { continue };
+        if dist(a, p) <= tol {
+            consistent.push((i, 0.0));
         }
         if matches!(l.motion, Some(MotionMode::Rapid | MotionMode::Linear)) {
             let d = [b[0] - a[0], b[1] - a[1], b[2] - a[2]];
@@ -1423,6 +1465,12 @@ fn plan_resume(program: &Program, st: &JournalState, cfg: &Config) -> Result<(us
         return Err(format!(
             "line {later} ran although line {first} before it did not (GRBL had already planned it when the \
              fault came); the path diverged from the program, so resuming automatically is unsafe"
+        ));
+    }
+    if let Some((cut, _)) = st.partial.filter(|(n, _)| *n > first) {
+        return Err(format!(
+            "line {cut} was cut mid-way although line {first} before it never ran (GRBL had already planned \
+             it when the fault came); the path diverged from the program, so resuming automatically is unsafe"
         ));
     }
     let line = program.line(first).expect("first is a program line");
