@@ -23,7 +23,9 @@ fn poisson(c: &mut Criterion) {
 
 fn anneal_swaps(c: &mut Criterion) {
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(2);
-    let slopes: Vec<(f64, f64)> = (0..1024).map(|_| (rng.gen_range(-0.4..0.4), rng.gen_range(-0.4..0.4))).collect();
+    let slopes: Vec<(f64, f64)> = (0..1024)
+        .map(|_| (rng.gen_range(-0.4..0.4), rng.gen_range(-0.4..0.4)))
+        .collect();
     let mut a = Arrangement::new(32, 32, &slopes, 0.02);
     let mut g = c.benchmark_group("anneal");
     const SWAPS: u64 = 100_000;

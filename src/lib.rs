@@ -31,3 +31,4 @@ pub mod npy;
 pub mod plot;
 pub mod slope;
 pub mod stream;
+pub mod toolpath;

@@ -22,6 +22,9 @@ enum Command {
     /// Target NDF → a tileable facet heightfield: CVT sampling, annealed arrangement, periodic Poisson
     /// integration. Writes DIR/tile.json, tile.npy, tile.png and tile.stl.
     Facets(cli::facets::Args),
+    /// Tile → G-code: ball-nose drop-cutter, roughing layers and raster finishing over the work area, checked
+    /// against the machine profile before anything is written.
+    Toolpath(cli::toolpath::Args),
     /// Stream a G-code program to a GRBL 1.1 controller over a serial port (character counting, journal,
     /// resume, check mode, feed hold on Ctrl-C).
     Stream(cli::stream::Args),
@@ -34,6 +37,7 @@ fn main() {
     let result: Result<()> = match cli.command {
         Command::Ndf(a) => cli::ndf::run(&a),
         Command::Facets(a) => cli::facets::run(&a),
+        Command::Toolpath(a) => cli::toolpath::run(&a),
         Command::Stream(a) => cli::stream::run(&a),
         Command::Emulate(a) => cli::emulate::run(&a),
     };

@@ -4,3 +4,4 @@ pub mod emulate;
 pub mod facets;
 pub mod ndf;
 pub mod stream;
+pub mod toolpath;

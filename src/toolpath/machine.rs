@@ -1,0 +1,327 @@
+//! Machine profiles: `machines/*.toml`, versioned (`version = 1`). Every length in mm, every feed in
+//! mm/min, accelerations in mm/s², spindle speeds in rev/min, times in s — the unit is in each field's name.
+//!
+//! A profile names the controller dialect, the travel, the feed/rapid/acceleration limits, the spindle range,
+//! the program conventions (safe z, spindle dwell) and the tools the machine has, each with cutting data for
+//! aluminium and for wax/plastics. Unknown keys are refused (with the line), so a typo never silently falls
+//! back to a default.
+
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The profile format version this build reads.
+pub const VERSION: u32 = 1;
+
+/// Controller dialect of the G-code.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Dialect {
+    /// GRBL 1.1: no G64 (its junction deviation `$11` plays that role), `M2`, no `%`.
+    Grbl,
+    /// LinuxCNC: `G64 P<tolerance>` path blending, `M2`.
+    Linuxcnc,
+}
+
+/// Machine travel, mm.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Travel {
+    /// X travel, mm.
+    pub x_mm: f64,
+    /// Y travel, mm.
+    pub y_mm: f64,
+    /// Z travel, mm.
+    pub z_mm: f64,
+}
+
+/// Motion limits.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Limits {
+    /// Highest cutting feed in X/Y, mm/min.
+    pub max_feed_mm_min: f64,
+    /// Highest feed in Z, mm/min.
+    pub max_feed_z_mm_min: f64,
+    /// Rapid (G0) rate in X/Y, mm/min.
+    pub rapid_mm_min: f64,
+    /// Rapid rate in Z, mm/min.
+    pub rapid_z_mm_min: f64,
+    /// Acceleration in X/Y, mm/s².
+    pub acceleration_mm_s2: f64,
+    /// Acceleration in Z, mm/s².
+    pub acceleration_z_mm_s2: f64,
+    /// Cornering tolerance: GRBL's junction deviation `$11`, LinuxCNC's `G64 P`, mm.
+    pub path_tolerance_mm: f64,
+}
+
+/// Spindle speed range.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Spindle {
+    /// Lowest speed, rev/min.
+    pub min_rpm: f64,
+    /// Highest speed, rev/min.
+    pub max_rpm: f64,
+}
+
+/// Program conventions.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ProgramDefaults {
+    /// Height above the stock top (z = 0) for rapid moves, mm.
+    pub safe_z_mm: f64,
+    /// Dwell after the spindle starts, s.
+    pub spindle_dwell_s: f64,
+}
+
+/// Cutter geometry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ToolKind {
+    /// Ball-nose end mill.
+    Ball,
+    /// Flat end mill.
+    Flat,
+    /// Bull-nose end mill (flat with a corner radius).
+    Bull,
+}
+
+/// Cutting data for one stock material.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CuttingData {
+    /// Cutting feed, mm/min.
+    pub feed_mm_min: f64,
+    /// Plunge feed, mm/min.
+    pub plunge_mm_min: f64,
+    /// Spindle speed, rev/min.
+    pub spindle_rpm: f64,
+    /// Largest depth of cut per pass, mm.
+    pub max_depth_of_cut_mm: f64,
+}
+
+/// A tool in the machine's library.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Tool {
+    /// Identifier used on the command line (`--tool ID`).
+    pub id: String,
+    /// Geometry.
+    pub kind: ToolKind,
+    /// Cutting diameter, mm.
+    pub diameter_mm: f64,
+    /// Corner radius of a bull-nose, mm (0 for flat; the radius for ball).
+    #[serde(default)]
+    pub corner_radius_mm: f64,
+    /// Flute (cutting) length, mm: the deepest the tool can reach below the stock top.
+    pub flute_length_mm: f64,
+    /// Tool number in the tool changer / table.
+    #[serde(default)]
+    pub number: u32,
+    /// Cutting data in aluminium.
+    pub aluminium: CuttingData,
+    /// Cutting data in machining wax and plastics.
+    pub wax: CuttingData,
+}
+
+/// Stock material (selects the cutting data).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Stock {
+    /// Aluminium.
+    Aluminium,
+    /// Machining wax and plastics.
+    Wax,
+}
+
+impl Tool {
+    /// Cutting data for a stock.
+    pub fn cutting(&self, stock: Stock) -> &CuttingData {
+        match stock {
+            Stock::Aluminium => &self.aluminium,
+            Stock::Wax => &self.wax,
+        }
+    }
+
+    /// Radius, mm.
+    pub fn radius_mm(&self) -> f64 {
+        self.diameter_mm / 2.0
+    }
+}
+
+/// A machine profile.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Machine {
+    /// Profile format version ([`VERSION`]).
+    pub version: u32,
+    /// Human-readable name.
+    pub name: String,
+    /// Controller dialect.
+    pub dialect: Dialect,
+    /// Travel.
+    pub travel: Travel,
+    /// Motion limits.
+    pub limits: Limits,
+    /// Spindle range.
+    pub spindle: Spindle,
+    /// Program conventions.
+    pub program: ProgramDefaults,
+    /// Tools.
+    pub tools: Vec<Tool>,
+}
+
+/// A machine profile that cannot be used.
+#[derive(Debug, thiserror::Error)]
+#[error("{path}: {reason}")]
+pub struct MachineError {
+    /// The profile file.
+    pub path: String,
+    /// What is wrong, naming the field.
+    pub reason: String,
+}
+
+impl Machine {
+    /// Read and validate a profile.
+    pub fn load(path: &Path) -> Result<Self, MachineError> {
+        let err = |reason: String| MachineError {
+            path: path.display().to_string(),
+            reason,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| err(format!("cannot read the machine profile: {e}")))?;
+        Self::parse(&text).map_err(err)
+    }
+
+    /// Parse and validate profile text.
+    pub fn parse(text: &str) -> Result<Self, String> {
+        // Check the version first so an old or new profile gets that message, not a field error.
+        let raw: toml::Value = toml::from_str(text).map_err(|e| e.to_string())?;
+        match raw.get("version").and_then(|v| v.as_integer()) {
+            Some(v) if v == VERSION as i64 => {}
+            Some(v) => {
+                return Err(format!(
+                    "`version` = {v}: this build reads machine profiles of version {VERSION}"
+                ))
+            }
+            None => return Err(format!("missing `version` (expected version = {VERSION})")),
+        }
+        let m: Machine = toml::from_str(text).map_err(|e| e.to_string())?;
+        m.validate()?;
+        Ok(m)
+    }
+
+    fn validate(&self) -> Result<(), String> {
+        let pos = |name: &str, v: f64| -> Result<(), String> {
+            if v.is_finite() && v > 0.0 {
+                Ok(())
+            } else {
+                Err(format!("`{name}` must be a positive number, got {v}"))
+            }
+        };
+        pos("travel.x_mm", self.travel.x_mm)?;
+        pos("travel.y_mm", self.travel.y_mm)?;
+        pos("travel.z_mm", self.travel.z_mm)?;
+        let l = &self.limits;
+        pos("limits.max_feed_mm_min", l.max_feed_mm_min)?;
+        pos("limits.max_feed_z_mm_min", l.max_feed_z_mm_min)?;
+        pos("limits.rapid_mm_min", l.rapid_mm_min)?;
+        pos("limits.rapid_z_mm_min", l.rapid_z_mm_min)?;
+        pos("limits.acceleration_mm_s2", l.acceleration_mm_s2)?;
+        pos("limits.acceleration_z_mm_s2", l.acceleration_z_mm_s2)?;
+        pos("limits.path_tolerance_mm", l.path_tolerance_mm)?;
+        pos("spindle.max_rpm", self.spindle.max_rpm)?;
+        if !(self.spindle.min_rpm >= 0.0 && self.spindle.min_rpm <= self.spindle.max_rpm) {
+            return Err(format!(
+                "`spindle.min_rpm` = {} must be in [0, max_rpm]",
+                self.spindle.min_rpm
+            ));
+        }
+        pos("program.safe_z_mm", self.program.safe_z_mm)?;
+        if self.program.spindle_dwell_s.is_nan() || self.program.spindle_dwell_s < 0.0 {
+            return Err("`program.spindle_dwell_s` must be ≥ 0".into());
+        }
+        if self.tools.is_empty() {
+            return Err("no `[[tools]]`: a machine needs at least one tool".into());
+        }
+        for (k, t) in self.tools.iter().enumerate() {
+            let f = |field: &str| format!("tools[{k}] (`{}`).{field}", t.id);
+            if self.tools[..k].iter().any(|o| o.id == t.id) {
+                return Err(format!("tool id `{}` is used twice", t.id));
+            }
+            pos(&f("diameter_mm"), t.diameter_mm)?;
+            pos(&f("flute_length_mm"), t.flute_length_mm)?;
+            match t.kind {
+                ToolKind::Bull if !(t.corner_radius_mm > 0.0 && t.corner_radius_mm < t.radius_mm()) => {
+                    return Err(format!(
+                        "{} must be in (0, diameter/2) for a bull-nose",
+                        f("corner_radius_mm")
+                    ))
+                }
+                _ => {}
+            }
+            for (name, c) in [("aluminium", &t.aluminium), ("wax", &t.wax)] {
+                pos(&f(&format!("{name}.feed_mm_min")), c.feed_mm_min)?;
+                pos(&f(&format!("{name}.plunge_mm_min")), c.plunge_mm_min)?;
+                pos(&f(&format!("{name}.spindle_rpm")), c.spindle_rpm)?;
+                pos(&f(&format!("{name}.max_depth_of_cut_mm")), c.max_depth_of_cut_mm)?;
+            }
+        }
+        Ok(())
+    }
+
+    /// The tool with this id; the error lists the ones there are.
+    pub fn tool(&self, id: &str) -> Result<&Tool, String> {
+        self.tools.iter().find(|t| t.id == id).ok_or_else(|| {
+            let ids: Vec<&str> = self.tools.iter().map(|t| t.id.as_str()).collect();
+            format!(
+                "machine `{}` has no tool `{id}`; its tools: {}",
+                self.name,
+                ids.join(", ")
+            )
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped() -> Vec<std::path::PathBuf> {
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("machines");
+        let mut v: Vec<_> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().path())
+            .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+            .collect();
+        v.sort();
+        v
+    }
+
+    #[test]
+    fn shipped_profiles_load() {
+        let all = shipped();
+        assert!(all.len() >= 3, "{all:?}");
+        let mut dialects = vec![];
+        for p in all {
+            let m = Machine::load(&p).unwrap_or_else(|e| panic!("{e}"));
+            assert!(
+                m.tools.iter().any(|t| t.kind == ToolKind::Ball),
+                "{}: no ball-nose",
+                p.display()
+            );
+            dialects.push(m.dialect);
+        }
+        assert!(dialects.contains(&Dialect::Grbl) && dialects.contains(&Dialect::Linuxcnc));
+    }
+
+    #[test]
+    fn bad_profiles_name_the_field() {
+        let good = std::fs::read_to_string(&shipped()[0]).unwrap();
+        let e = Machine::parse(&good.replace("version = 1", "version = 2")).unwrap_err();
+        assert!(e.contains("version"), "{e}");
+        let e = Machine::parse(&good.replace("x_mm =", "x_mmm =")).unwrap_err();
+        assert!(e.contains("x_mmm"), "{e}");
+        let e = Machine::parse(&good.replacen("diameter_mm = ", "diameter_mm = -", 1)).unwrap_err();
+        assert!(e.contains("diameter_mm"), "{e}");
+    }
+}
