@@ -29,6 +29,7 @@ pub mod io;
 pub mod ndf;
 pub mod npy;
 pub mod plot;
+pub mod simulate;
 pub mod slope;
 pub mod stream;
 pub mod toolpath;

@@ -25,6 +25,9 @@ enum Command {
     /// Tile → G-code: ball-nose drop-cutter, roughing layers and raster finishing over the work area, checked
     /// against the machine profile before anything is written.
     Toolpath(cli::toolpath::Args),
+    /// Any G-code program → the heightfield the bit cuts (material removal on a stock heightfield), with
+    /// deviation from the design when given.
+    Simulate(cli::simulate::Args),
     /// Stream a G-code program to a GRBL 1.1 controller over a serial port (character counting, journal,
     /// resume, check mode, feed hold on Ctrl-C).
     Stream(cli::stream::Args),
@@ -38,6 +41,7 @@ fn main() {
         Command::Ndf(a) => cli::ndf::run(&a),
         Command::Facets(a) => cli::facets::run(&a),
         Command::Toolpath(a) => cli::toolpath::run(&a),
+        Command::Simulate(a) => cli::simulate::run(&a),
         Command::Stream(a) => cli::stream::run(&a),
         Command::Emulate(a) => cli::emulate::run(&a),
     };

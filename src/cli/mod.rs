@@ -3,5 +3,6 @@
 pub mod emulate;
 pub mod facets;
 pub mod ndf;
+pub mod simulate;
 pub mod stream;
 pub mod toolpath;
