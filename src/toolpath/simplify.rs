@@ -7,7 +7,10 @@
 
 use super::moves::P3;
 
-/// Greedy one-sided simplification: the kept points, first and last always kept.
+/// Greedy one-sided simplification: the kept points, first and last always kept. O(n): while a chord from
+/// the last kept point `a` is extended, the interval of chord slopes that keeps every point passed within
+/// `[0, tol]` below the chord is narrowed point by point; the chord to `b` is allowed while its slope lies in
+/// the interval and `b` is on the same straight line in x, y.
 pub fn simplify(points: &[P3], tol: f64) -> Vec<P3> {
     if points.len() <= 2 {
         return points.to_vec();
@@ -15,10 +18,35 @@ pub fn simplify(points: &[P3], tol: f64) -> Vec<P3> {
     let mut out = vec![points[0]];
     let mut a = 0;
     while a < points.len() - 1 {
-        // extend b as far as every intermediate point is under the chord a→b within tol
+        let pa = points[a];
+        let d = [points[a + 1][0] - pa[0], points[a + 1][1] - pa[1]];
+        let len = d[0].hypot(d[1]);
         let mut b = a + 1;
-        while b + 1 < points.len() && chord_ok(points, a, b + 1, tol) {
-            b += 1;
+        if len > 0.0 {
+            let dir = [d[0] / len, d[1] / len];
+            let (mut lo, mut hi) = (f64::NEG_INFINITY, f64::INFINITY);
+            let mut last_u = 0.0;
+            while b + 1 < points.len() {
+                // the point b would now be passed over: it constrains the chord slope
+                let q = points[b];
+                let (u, off) = along(pa, dir, q);
+                if off > 1e-9 || u <= last_u {
+                    break;
+                }
+                last_u = u;
+                lo = lo.max((q[2] - pa[2]) / u - 1e-12 / u);
+                hi = hi.min((q[2] + tol - pa[2]) / u + 1e-12 / u);
+                let c = points[b + 1];
+                let (uc, offc) = along(pa, dir, c);
+                if offc > 1e-9 || uc <= u {
+                    break;
+                }
+                let m = (c[2] - pa[2]) / uc;
+                if m < lo || m > hi {
+                    break;
+                }
+                b += 1;
+            }
         }
         out.push(points[b]);
         a = b;
@@ -26,28 +54,11 @@ pub fn simplify(points: &[P3], tol: f64) -> Vec<P3> {
     out
 }
 
-/// True when every point strictly between `a` and `b` lies at most `tol` below the chord and not above it.
-fn chord_ok(p: &[P3], a: usize, b: usize, tol: f64) -> bool {
-    let (pa, pb) = (p[a], p[b]);
-    let d = [pb[0] - pa[0], pb[1] - pa[1]];
-    let len2 = d[0] * d[0] + d[1] * d[1];
-    if len2 == 0.0 {
-        return false;
-    }
-    for q in &p[a + 1..b] {
-        let t = ((q[0] - pa[0]) * d[0] + (q[1] - pa[1]) * d[1]) / len2;
-        // horizontal distance from the chord's line
-        let (cx, cy) = (pa[0] + t * d[0], pa[1] + t * d[1]);
-        if (q[0] - cx).hypot(q[1] - cy) > 1e-9 || !(0.0..=1.0).contains(&t) {
-            return false;
-        }
-        let z = pa[2] + t * (pb[2] - pa[2]);
-        let above = z - q[2]; // chord height above the CL point
-        if above < -1e-12 || above > tol {
-            return false;
-        }
-    }
-    true
+/// Distance of `q` along the line from `a` in direction `dir` (x, y), and its distance off that line.
+#[inline]
+fn along(a: P3, dir: [f64; 2], q: P3) -> (f64, f64) {
+    let (dx, dy) = (q[0] - a[0], q[1] - a[1]);
+    (dx * dir[0] + dy * dir[1], (dx * dir[1] - dy * dir[0]).abs())
 }
 
 #[cfg(test)]
