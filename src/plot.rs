@@ -337,3 +337,138 @@ mod tests {
         assert!(lo[0] < 80 && lo[2] > 60, "{lo:?}");
     }
 }
+
+/// One curve of a [`LinePlot`].
+#[derive(Clone, Debug)]
+pub struct Series {
+    /// Legend text.
+    pub label: String,
+    /// Points `(x, y)`.
+    pub points: Vec<(f64, f64)>,
+    /// Colour.
+    pub color: [u8; 3],
+    /// Dashed line.
+    pub dashed: bool,
+}
+
+/// A line chart with axes, ticks and a legend.
+#[derive(Clone, Debug)]
+pub struct LinePlot {
+    /// Title above the plot.
+    pub title: String,
+    /// x axis label.
+    pub x_label: String,
+    /// y axis label.
+    pub y_label: String,
+    /// Curves.
+    pub series: Vec<Series>,
+    /// Plot area size in pixels `(w, h)`.
+    pub size_px: (u32, u32),
+    /// log10 y axis (values ≤ 0 are dropped).
+    pub log_y: bool,
+}
+
+/// Colours for up to six series (colour-blind friendly, Okabe–Ito).
+pub const PALETTE: [[u8; 3]; 6] = [
+    [0, 114, 178],
+    [213, 94, 0],
+    [0, 158, 115],
+    [204, 121, 167],
+    [230, 159, 0],
+    [86, 180, 233],
+];
+
+impl LinePlot {
+    /// Render to a canvas.
+    pub fn render(&self) -> Canvas {
+        let (pw, ph) = (self.size_px.0 as i32, self.size_px.1 as i32);
+        let (left, top, right, bottom) = (70, 28, 20, 44);
+        let mut cv = Canvas::new((left + pw + right) as u32, (top + ph + bottom) as u32);
+        let ty = |y: f64| {
+            if self.log_y {
+                if y > 0.0 {
+                    y.log10()
+                } else {
+                    f64::NAN
+                }
+            } else {
+                y
+            }
+        };
+        let pts = self
+            .series
+            .iter()
+            .flat_map(|s| s.points.iter())
+            .filter(|p| p.0.is_finite() && ty(p.1).is_finite());
+        let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+        for p in pts {
+            x0 = x0.min(p.0);
+            x1 = x1.max(p.0);
+            y0 = y0.min(ty(p.1));
+            y1 = y1.max(ty(p.1));
+        }
+        if x0 >= x1 {
+            x1 = x0 + 1.0;
+        }
+        if y0 >= y1 {
+            y1 = y0 + 1.0;
+        }
+        if !self.log_y && y0 > 0.0 {
+            y0 = 0.0;
+        }
+        let margin = 0.05 * (y1 - y0);
+        y1 += margin;
+        let px = |x: f64| left + ((x - x0) / (x1 - x0) * pw as f64).round() as i32;
+        let py = |y: f64| top + ph - ((y - y0) / (y1 - y0) * ph as f64).round() as i32;
+        cv.frame(left - 1, top - 1, (pw + 2) as u32, (ph + 2) as u32);
+        for t in nice_ticks(x0, x1, 6) {
+            cv.line(px(t), top + ph, px(t), top + ph + 4);
+            cv.text(px(t), top + ph + 14, &fmt_tick(t), Alignment::Center);
+        }
+        for t in nice_ticks(y0, y1, 5) {
+            cv.line(left - 5, py(t), left - 1, py(t));
+            let label = if self.log_y {
+                format!("1e{}", t.round() as i64)
+            } else {
+                fmt_tick(t)
+            };
+            if !self.log_y || (t - t.round()).abs() < 1e-9 {
+                cv.text(left - 7, py(t) + 3, &label, Alignment::Right);
+            }
+        }
+        cv.text(left + pw / 2, top + ph + 30, &self.x_label, Alignment::Center);
+        cv.text(4, top - 8, &self.y_label, Alignment::Left);
+        cv.text(left + pw / 2, 14, &self.title, Alignment::Center);
+        for (k, s) in self.series.iter().enumerate() {
+            let mut prev: Option<(i32, i32)> = None;
+            let mut step = 0usize;
+            for p in &s.points {
+                let y = ty(p.1);
+                if !y.is_finite() {
+                    prev = None;
+                    continue;
+                }
+                let cur = (px(p.0), py(y.clamp(y0, y1)));
+                if let Some(a) = prev {
+                    step += 1;
+                    if !s.dashed || step % 4 < 2 {
+                        draw_line_color(&mut cv, a, cur, s.color);
+                    }
+                }
+                prev = Some(cur);
+            }
+            // legend
+            let ly = top + 12 + 14 * k as i32;
+            draw_line_color(&mut cv, (left + pw - 150, ly - 3), (left + pw - 130, ly - 3), s.color);
+            cv.text(left + pw - 125, ly, &s.label, Alignment::Left);
+        }
+        cv
+    }
+}
+
+fn draw_line_color(cv: &mut Canvas, a: (i32, i32), b: (i32, i32), c: [u8; 3]) {
+    Line::new(Point::new(a.0, a.1), Point::new(b.0, b.1))
+        .into_styled(PrimitiveStyle::with_stroke(Rgb888::new(c[0], c[1], c[2]), 2))
+        .draw(cv)
+        .ok();
+}

@@ -18,10 +18,12 @@
 pub mod deconvolve;
 pub mod format;
 pub mod halfangle;
+pub mod lobes;
 
 pub use deconvolve::{LrReport, LucyRichardson, StoppedBy};
 pub use format::NdfFile;
 pub use halfangle::{HalfAngleConfig, Source};
+pub use lobes::Kernel;
 
 use crate::brdf::{Brdf, ConductorIor};
 use crate::slope::{SlopeDomain, SlopeGrid, SlopeStats};
@@ -161,43 +163,8 @@ pub struct Ndf {
 /// The base lobe `K` as an odd-sized kernel on the grid spacing of `domain`, centred at slope 0 and cropped
 /// to where it exceeds `1e-7` of its peak. Returns `(values, width, height)`.
 pub fn base_kernel(base: &Brdf, domain: &SlopeDomain, cfg: &NdfConfig) -> Result<(Vec<f64>, usize, usize), NdfError> {
-    let (dp, dq) = (domain.dp(), domain.dq());
-    let (mx, my) = (domain.nx / 2, domain.ny / 2);
-    let kd = SlopeDomain {
-        nx: 2 * mx + 1,
-        ny: 2 * my + 1,
-        p_min: -(mx as f64 + 0.5) * dp,
-        p_max: (mx as f64 + 0.5) * dp,
-        q_min: -(my as f64 + 0.5) * dq,
-        q_max: (my as f64 + 0.5) * dq,
-    };
-    let (k, _) = halfangle::half_angle_density(base, kd, &cfg.half_angle);
-    let peak = k.density.iter().copied().fold(0.0, f64::max);
-    if peak.is_nan() || peak <= 0.0 {
-        return Err(NdfError::Empty {
-            what: format!("base lobe `{}`", base.spec),
-            max_slope: domain.p_max,
-        });
-    }
-    // Symmetric crop around the centre to the support above the threshold.
-    let thr = 1e-7 * peak;
-    let (mut rx, mut ry) = (0usize, 0usize);
-    for j in 0..kd.ny {
-        for i in 0..kd.nx {
-            if k.at(i, j) > thr {
-                rx = rx.max(i.abs_diff(mx));
-                ry = ry.max(j.abs_diff(my));
-            }
-        }
-    }
-    let (kw, kh) = (2 * rx + 1, 2 * ry + 1);
-    let mut out = Vec::with_capacity(kw * kh);
-    for j in (my - ry)..=(my + ry) {
-        for i in (mx - rx)..=(mx + rx) {
-            out.push(k.at(i, j));
-        }
-    }
-    Ok((out, kw, kh))
+    let k = Kernel::from_brdf(base, domain, cfg)?;
+    Ok((k.values, k.w, k.h))
 }
 
 fn remove_tilt(g: &SlopeGrid, p0: f64, q0: f64) -> SlopeGrid {
@@ -213,6 +180,17 @@ fn remove_tilt(g: &SlopeGrid, p0: f64, q0: f64) -> SlopeGrid {
 /// (when `base` is given), with its mean tilt removed.
 pub fn run(cfg: &NdfConfig, brdf: &Brdf, base: Option<&Brdf>) -> Result<Ndf, NdfError> {
     cfg.validate()?;
+    let kernel = match base {
+        Some(b) => Some(Kernel::from_brdf(b, &cfg.domain(), cfg)?),
+        None => None,
+    };
+    run_with_kernel(cfg, brdf, kernel.as_ref())
+}
+
+/// [`run`] with the base lobe given as a kernel on the grid's spacing (see [`Kernel`]), e.g. the scallop
+/// lobe of a raster finish.
+pub fn run_with_kernel(cfg: &NdfConfig, brdf: &Brdf, base: Option<&Kernel>) -> Result<Ndf, NdfError> {
+    cfg.validate()?;
     let domain = cfg.domain();
     let (observed, source) = halfangle::half_angle_density(brdf, domain, &cfg.half_angle);
     if observed.mass().is_nan() || observed.mass() <= 0.0 {
@@ -224,9 +202,8 @@ pub fn run(cfg: &NdfConfig, brdf: &Brdf, base: Option<&Brdf>) -> Result<Ndf, Ndf
     let mut target = observed.clone();
     let deconvolution = match base {
         None => LrReport::none(),
-        Some(b) => {
-            let (k, kw, kh) = base_kernel(b, &domain, cfg)?;
-            let mut lr = LucyRichardson::new(domain.nx, domain.ny, &k, kw, kh);
+        Some(k) => {
+            let mut lr = LucyRichardson::new(domain.nx, domain.ny, &k.values, k.w, k.h);
             lr.run(&observed.density, &mut target.density, cfg.iterations, cfg.tolerance)
         }
     };
@@ -249,7 +226,7 @@ pub fn run(cfg: &NdfConfig, brdf: &Brdf, base: Option<&Brdf>) -> Result<Ndf, Ndf
         deconvolution,
         source,
         brdf_spec: brdf.spec.clone(),
-        base_spec: base.map(|b| b.spec.clone()),
+        base_spec: base.map(|k| k.label.clone()),
         material: brdf.material,
         config: *cfg,
     })

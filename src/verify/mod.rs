@@ -1,0 +1,37 @@
+//! Stage 6 (verify) — the loop closes: the target against the design tile and the simulated milled surface.
+//!
+//! What is compared with what (DESIGN.md §6): the reference is the target's *observed* half-angle
+//! distribution `O` (before deconvolution). The design tile's NDF (its facet slopes) is convolved with the
+//! whole base lobe `K` before the comparison; the milled surface's NDF already carries the tool marks, so it
+//! is convolved only with the part of `K` that the simulation does not model (the material's own polish).
+//!
+//! - [`metrics`]: the figures and their tolerances (`metrics.json`),
+//! - [`render`]: sphere previews and BRDF slices,
+//! - [`report`]: the single-page offline HTML report.
+
+pub mod metrics;
+pub mod render;
+pub mod report;
+
+pub use metrics::{SurfaceMetrics, Tolerances};
+
+use serde::{Deserialize, Serialize};
+
+/// `metrics.json`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Metrics {
+    /// Format version.
+    pub version: u32,
+    /// The design tile (facet slopes ⊛ base lobe) against the target.
+    pub design: SurfaceMetrics,
+    /// The simulated milled surface (⊛ polish lobe) against the target.
+    pub milled: SurfaceMetrics,
+    /// The milled surface meets every tolerance.
+    pub pass: bool,
+    /// The tolerances used.
+    pub tolerances: Tolerances,
+    /// What the reference is and which lobes were applied.
+    pub reference: String,
+    /// Findings that explain shortfalls (bit radius, concavity, discretisation), in plain words.
+    pub notes: Vec<String>,
+}

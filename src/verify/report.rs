@@ -1,0 +1,143 @@
+//! `report.html`: one page that opens offline — every image is embedded as a `data:` URI, no script, no
+//! external style sheet.
+
+use super::metrics::SurfaceMetrics;
+use super::Metrics;
+use base64::Engine;
+
+/// A picture with a caption.
+pub struct Figure {
+    /// Heading.
+    pub title: String,
+    /// What it shows.
+    pub caption: String,
+    /// PNG bytes.
+    pub png: Vec<u8>,
+}
+
+/// Everything the page shows.
+pub struct Report<'a> {
+    /// Job name.
+    pub title: String,
+    /// The metrics.
+    pub metrics: &'a Metrics,
+    /// Figures in order.
+    pub figures: Vec<Figure>,
+    /// Job parameters as (key, value).
+    pub parameters: Vec<(String, String)>,
+    /// The G-code summary as (key, value).
+    pub program: Vec<(String, String)>,
+    /// Artifacts written, as (file, what).
+    pub artifacts: Vec<(String, String)>,
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn kv_table(rows: &[(String, String)]) -> String {
+    let mut s = String::from("<table class=\"kv\">");
+    for (k, v) in rows {
+        s.push_str(&format!("<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(v)));
+    }
+    s.push_str("</table>");
+    s
+}
+
+fn fmt(v: f64) -> String {
+    if v == 0.0 || (v.abs() >= 1e-3 && v.abs() < 1e5) {
+        format!("{v:.4}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+fn metrics_table(design: &SurfaceMetrics, milled: &SurfaceMetrics) -> String {
+    let mut s = String::from("<table class=\"metrics\"><tr><th>metric</th><th>tolerance</th><th>design tile</th><th>milled (simulated)</th></tr>");
+    for (d, m) in design.checks.iter().zip(&milled.checks) {
+        let cell = |c: &super::metrics::Check| {
+            format!(
+                "<td class=\"{}\">{} {}</td>",
+                if c.pass { "pass" } else { "fail" },
+                fmt(c.value),
+                if c.pass { "✓" } else { "✗" }
+            )
+        };
+        s.push_str(&format!(
+            "<tr><td>{}</td><td>{}</td>{}{}</tr>",
+            esc(&d.name),
+            esc(&d.tolerance),
+            cell(d),
+            cell(m)
+        ));
+    }
+    s.push_str("</table>");
+    s
+}
+
+impl Report<'_> {
+    /// The HTML text.
+    pub fn to_html(&self) -> String {
+        let m = self.metrics;
+        let b64 = base64::engine::general_purpose::STANDARD;
+        let mut h = String::with_capacity(1 << 20);
+        h.push_str("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">");
+        h.push_str(&format!("<title>brdfmill report — {}</title>", esc(&self.title)));
+        h.push_str(
+            "<style>body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}\
+             h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.6em}\
+             table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:.25em .6em;text-align:left}\
+             td.pass{background:#e6f4ea}td.fail{background:#fde8e8}.verdict{font-size:1.2em;padding:.6em 1em;border-radius:6px}\
+             .ok{background:#e6f4ea}.no{background:#fde8e8}figure{margin:1em 0}img{max-width:100%;border:1px solid #ddd}\
+             figcaption{color:#555;font-size:.9em}table.kv th{background:#f6f6f6;font-weight:normal}</style></head><body>",
+        );
+        h.push_str(&format!("<h1>brdfmill report — {}</h1>", esc(&self.title)));
+        h.push_str(&format!(
+            "<p class=\"verdict {}\">{}</p>",
+            if m.pass { "ok" } else { "no" },
+            if m.pass {
+                "The simulated milled surface meets every tolerance against the target.".to_string()
+            } else {
+                let failed: Vec<String> = m
+                    .milled
+                    .checks
+                    .iter()
+                    .filter(|c| !c.pass)
+                    .map(|c| format!("{} = {} (needs {})", c.name, fmt(c.value), c.tolerance))
+                    .collect();
+                format!("The simulated milled surface falls short: {}.", failed.join("; "))
+            }
+        ));
+        if !m.notes.is_empty() {
+            h.push_str("<h2>Why</h2><ul>");
+            for n in &m.notes {
+                h.push_str(&format!("<li>{}</li>", esc(n)));
+            }
+            h.push_str("</ul>");
+        }
+        h.push_str(&format!("<h2>Metrics</h2><p>Reference: {}.</p>", esc(&m.reference)));
+        h.push_str(&metrics_table(&m.design, &m.milled));
+        for f in &self.figures {
+            h.push_str(&format!(
+                "<h2>{}</h2><figure><img alt=\"{}\" src=\"data:image/png;base64,{}\"><figcaption>{}</figcaption></figure>",
+                esc(&f.title),
+                esc(&f.title),
+                b64.encode(&f.png),
+                esc(&f.caption)
+            ));
+        }
+        h.push_str("<h2>Job parameters</h2>");
+        h.push_str(&kv_table(&self.parameters));
+        h.push_str("<h2>G-code</h2>");
+        h.push_str(&kv_table(&self.program));
+        h.push_str("<h2>Artifacts</h2>");
+        h.push_str(&kv_table(&self.artifacts));
+        h.push_str("<p><small>Generated by brdfmill ");
+        h.push_str(env!("CARGO_PKG_VERSION"));
+        h.push_str(". The page is self-contained: it needs no network.</small></p></body></html>\n");
+        h
+    }
+}
