@@ -306,6 +306,9 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
                     pts.reverse();
                 }
                 let pts = simplify::simplify(&pts, tol);
+                if pts.is_empty() {
+                    continue; // a pass that misses the area (corners of a rotated raster)
+                }
                 if first {
                     b.approach(pts[0]);
                     first = false;
