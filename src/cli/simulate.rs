@@ -1,10 +1,211 @@
-//! `brdfmill simulate` (being built: see issue "Cut simulation").
+//! `brdfmill simulate`: any G-code program → the milled heightfield (sim.npy, sim.png, sim.json, optional
+//! sim.stl) and, given the design, its deviation map.
+
+use anyhow::{anyhow, bail, Context, Result};
+use brdfmill::facets::TileFile;
+use brdfmill::simulate::{self, SimulateConfig, ToolShape};
+use brdfmill::toolpath::machine::Machine;
+use std::path::PathBuf;
 
 /// Arguments of `brdfmill simulate`.
 #[derive(clap::Args, Debug)]
-pub struct Args {}
+pub struct Args {
+    /// The G-code program (any source: the subset of DESIGN.md §5; anything else is refused with line and column)
+    pub program: PathBuf,
+    /// The bit: ball:D, flat:D or bull:D:R (diameter and corner radius, mm)
+    #[arg(long)]
+    pub tool: String,
+    /// Stock grid pitch (µm)
+    #[arg(long, default_value_t = 5.0)]
+    pub pitch_um: f64,
+    /// Stock bounds x0,y0,x1,y1 (mm); default: the program's cutting extents plus the tool radius
+    #[arg(long)]
+    pub bounds: Option<String>,
+    /// Height of the stock top (mm)
+    #[arg(long, default_value_t = 0.0)]
+    pub stock_top_mm: f64,
+    /// Largest chord sagitta when arcs are linearised (µm)
+    #[arg(long, default_value_t = 0.1)]
+    pub arc_tolerance_um: f64,
+    /// Flute length (mm): refuse a program whose tip goes deeper below the stock top; default: not checked
+    #[arg(long)]
+    pub flute_length_mm: Option<f64>,
+    /// Largest stock grid, cells (8 bytes each)
+    #[arg(long, default_value_t = 250_000_000)]
+    pub max_cells: usize,
+    /// Machine profile whose limits the time estimate uses; default: machines/linuxcnc-mill.toml's
+    #[arg(long)]
+    pub machine: Option<PathBuf>,
+    /// The design (tile.json from `brdfmill facets`, tile.npy beside it), repeated from the work origin:
+    /// writes deviation.png and the over-/under-cut figures
+    #[arg(long)]
+    pub design: Option<PathBuf>,
+    /// Also write sim.stl (a closed solid through at most --stl-side samples per side)
+    #[arg(long)]
+    pub stl: bool,
+    /// Samples per side of sim.stl at most
+    #[arg(long, default_value_t = 1000)]
+    pub stl_side: usize,
+    /// Output folder
+    #[arg(long)]
+    pub out: PathBuf,
+}
+
+/// Parse `x0,y0,x1,y1`.
+fn parse_bounds(s: &str) -> Result<[f64; 4]> {
+    let v: Vec<f64> = s
+        .split(',')
+        .map(|t| t.trim().parse::<f64>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| anyhow!("--bounds `{s}`: expected four numbers x0,y0,x1,y1 in mm"))?;
+    match v[..] {
+        [a, b, c, d] => Ok([a, b, c, d]),
+        _ => bail!("--bounds `{s}`: expected four numbers x0,y0,x1,y1 in mm"),
+    }
+}
+
+/// Build the configuration from the arguments.
+pub fn config(a: &Args) -> Result<SimulateConfig> {
+    let machine = match &a.machine {
+        Some(p) => Some(Machine::load(p)?),
+        None => None,
+    };
+    Ok(SimulateConfig {
+        tool: ToolShape::parse(&a.tool).map_err(|e| anyhow!("--tool: {e}"))?,
+        pitch_um: a.pitch_um,
+        bounds_mm: a.bounds.as_deref().map(parse_bounds).transpose()?,
+        stock_top_mm: a.stock_top_mm,
+        arc_tolerance_um: a.arc_tolerance_um,
+        max_cells: a.max_cells,
+        flute_length_mm: a.flute_length_mm.unwrap_or(0.0),
+        machine,
+        ..Default::default()
+    })
+}
 
 /// Run the subcommand.
-pub fn run(_a: &Args) -> anyhow::Result<()> {
-    anyhow::bail!("`brdfmill simulate` is not available in this build yet")
+pub fn run(a: &Args) -> Result<()> {
+    let cfg = config(a)?;
+    let text = std::fs::read_to_string(&a.program).with_context(|| format!("cannot read {}", a.program.display()))?;
+    let design = match &a.design {
+        Some(p) => {
+            let t = TileFile::read(p).map_err(|e| anyhow!(e))?;
+            Some(t.load_heightfield(p).map_err(|e| anyhow!(e))?)
+        }
+        None => None,
+    };
+    let t0 = std::time::Instant::now();
+    let sim = simulate::run(&text, &cfg).map_err(|e| anyhow!("{}: {e}", a.program.display()))?;
+    let t_sim = t0.elapsed().as_secs_f64();
+    let dev = design.as_ref().map(|d| simulate::deviation(&sim, d, &cfg.tool));
+    let t_dev = t0.elapsed().as_secs_f64() - t_sim;
+
+    // everything computed; encode, then write
+    let s = &sim.stats;
+    let relief = sim
+        .heightfield
+        .relief_png(&format!("simulated cut, {} at {} um", cfg.tool, cfg.pitch_um), 1024)
+        .to_png();
+    let dev_png = dev.as_ref().map(|d| {
+        d.to_png("simulated - design (um); grey: unreachable or edge band", 1024)
+            .to_png()
+    });
+    let stl = a.stl.then(|| {
+        let tris = simulate::solid(&sim, a.stl_side, 1.0);
+        brdfmill::facets::stl::to_binary_stl(&tris, "brdfmill simulated cut")
+    });
+    let json = serde_json::to_string_pretty(&serde_json::json!({
+        "format": "brdfmill-sim",
+        "version": 1,
+        "program": a.program.display().to_string(),
+        "npy": "sim.npy",
+        "origin_mm": sim.origin_mm,
+        "config": cfg,
+        "stats": s,
+        "deviation": dev,
+        "design": a.design.as_ref().map(|p| p.display().to_string()),
+    }))?;
+    sim.heightfield.write_npy(&a.out.join("sim.npy"))?;
+    brdfmill::io::write_atomic(&a.out.join("sim.png"), &relief)?;
+    if let Some(b) = &dev_png {
+        brdfmill::io::write_atomic(&a.out.join("deviation.png"), b)?;
+    }
+    if let Some(b) = &stl {
+        brdfmill::io::write_atomic(&a.out.join("sim.stl"), b)?;
+    }
+    brdfmill::io::write_atomic(&a.out.join("sim.json"), json.as_bytes())?;
+
+    println!(
+        "program   {} lines, {} moves ({} arcs → {} segments, {} reach the stock){}",
+        s.lines,
+        s.moves,
+        s.arcs,
+        s.segments,
+        s.cutting_segments,
+        if s.inch { ", inches converted to mm" } else { "" }
+    );
+    println!(
+        "stock     {} × {} cells at {} µm over X {:.3}..{:.3} Y {:.3}..{:.3} mm, top z = {} mm",
+        s.cells[0],
+        s.cells[1],
+        cfg.pitch_um,
+        s.bounds_mm[0],
+        s.bounds_mm[2],
+        s.bounds_mm[1],
+        s.bounds_mm[3],
+        cfg.stock_top_mm
+    );
+    println!(
+        "removed   {:.4} mm³, deepest z {:.4} mm",
+        s.removed_volume_mm3, s.min_z_mm
+    );
+    println!(
+        "time      {} estimated ({}), {:.1} mm cutting, {:.1} mm rapid",
+        brdfmill::toolpath::hms(s.estimated_s),
+        s.machine,
+        s.feed_length_mm,
+        s.rapid_length_mm
+    );
+    if s.rapid_cuts > 0 {
+        println!(
+            "WARNING   {} rapid (G0) moves remove material, first at lines {:?}",
+            s.rapid_cuts, s.rapid_cut_lines
+        );
+    }
+    println!(
+        "sweep     {:.3e} cells swept in {:.2} s ({:.0} M cells/s)",
+        s.swept_cells as f64,
+        t_sim,
+        s.swept_cells as f64 / t_sim / 1e6
+    );
+    if let Some(d) = &dev {
+        println!(
+            "design    interior {} cells ({:.3} mm from the edge); unreachable {:.2}% (opening > design + {} µm)",
+            d.interior_cells,
+            d.interior_margin_mm,
+            100.0 * d.unreachable_fraction,
+            d.reach_tolerance_um
+        );
+        println!(
+            "over      {:.3} µm at ({:.4}, {:.4}) mm; where reachable {:.3} µm at ({:.4}, {:.4}) mm",
+            d.max_over_um,
+            d.max_over_at_mm[0],
+            d.max_over_at_mm[1],
+            d.max_over_reachable_um,
+            d.max_over_reachable_at_mm[0],
+            d.max_over_reachable_at_mm[1]
+        );
+        println!(
+            "under     {:.3} µm at ({:.4}, {:.4}) mm (gouge when > 0); rms where reachable {:.3} µm",
+            d.max_under_um, d.max_under_at_mm[0], d.max_under_at_mm[1], d.rms_reachable_um
+        );
+        println!("deviation computed in {t_dev:.2} s");
+    }
+    println!(
+        "wrote     {}/sim.npy, sim.png, sim.json{}{}",
+        a.out.display(),
+        if dev.is_some() { ", deviation.png" } else { "" },
+        if a.stl { ", sim.stl" } else { "" }
+    );
+    Ok(())
 }

@@ -1,2 +1,651 @@
-//! Stage 5 — simulate: any G-code program to the heightfield the bit really cuts (being built; see the
-//! issue "Cut simulation: any G-code to a milled heightfield").
+//! Stage 5 — simulate: any G-code program to the heightfield the bit really cuts (DESIGN.md §5).
+//!
+//! - [`gcode`]: the reader for the G-code subset of §5; what it does not understand is refused with line and
+//!   column. Arcs become chords within `arc_tolerance_um` (chord sagitta).
+//! - [`sweep`]: the lowest point of a ball, flat or bull bit swept along one straight segment, in closed form
+//!   for ball and flat (a certified 1 pm bound for the bull).
+//! - [`stock`]: the stock heightfield in tiles, swept in parallel with rayon, each tile owned by one task.
+//! - [`deviation`]: the simulated surface against the design tile, and where the bit cannot reach.
+//!
+//! The stock is a non-periodic grid of `pitch_um` over the program's cutting extents plus the tool radius
+//! (or given bounds), flat at `stock_top_mm`; every segment lowers it to `min(stock, sweep)` at each cell
+//! centre, exactly for linear moves. The machining time comes from the toolpath stage's planner
+//! ([`crate::toolpath::estimate::estimate_s`]) with the limits of a machine profile — by default those of
+//! `machines/linuxcnc-mill.toml` (X/Y 500 mm/s², Z 300 mm/s², rapids 3000 / 1500 mm/min, junction deviation
+//! 0.001 mm), said in [`SimStats::machine`].
+//!
+//! # Example
+//! ```
+//! use brdfmill::simulate::{self, SimulateConfig, ToolShape};
+//! let cfg = SimulateConfig { tool: ToolShape::parse("ball:1.0").unwrap(), pitch_um: 10.0, ..Default::default() };
+//! let sim = simulate::run("G21 G90\nG0 X0 Y0.005 Z1\nG1 Z-0.2 F100\nX2\nG0 Z1\nM2\n", &cfg).unwrap();
+//! // a 0.2 mm deep groove of a 1 mm ball (along a row of cell centres)
+//! let (lo, _) = sim.heightfield.range();
+//! assert!((lo + 0.2).abs() < 1e-12);
+//! ```
+
+pub mod deviation;
+pub mod gcode;
+pub mod stock;
+pub mod sweep;
+
+pub use deviation::{deviation, Deviation};
+
+use crate::heightfield::Heightfield;
+use crate::toolpath::machine::Machine;
+use crate::toolpath::moves::P3;
+use gcode::{ParseOptions, Program};
+use serde::{Deserialize, Serialize};
+use sweep::Bit;
+
+/// The bit's shape. Diameters and radii in mm.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum ToolShape {
+    /// Ball-nose end mill.
+    Ball {
+        /// Diameter, mm.
+        diameter_mm: f64,
+    },
+    /// Flat end mill.
+    Flat {
+        /// Diameter, mm.
+        diameter_mm: f64,
+    },
+    /// Bull-nose end mill: a flat end with rounded corners.
+    Bull {
+        /// Diameter, mm.
+        diameter_mm: f64,
+        /// Corner radius, mm (at most half the diameter; half the diameter is a ball).
+        corner_radius_mm: f64,
+    },
+}
+
+impl Default for ToolShape {
+    fn default() -> Self {
+        ToolShape::Ball { diameter_mm: 1.0 }
+    }
+}
+
+impl ToolShape {
+    /// Parse `ball:D`, `flat:D` or `bull:D:R` (diameter and corner radius in mm).
+    pub fn parse(s: &str) -> Result<Self, String> {
+        let parts: Vec<&str> = s.split(':').map(str::trim).collect();
+        let num = |k: usize, what: &str| -> Result<f64, String> {
+            let t = parts.get(k).ok_or_else(|| format!("tool `{s}`: missing the {what}"))?;
+            t.parse::<f64>()
+                .map_err(|_| format!("tool `{s}`: the {what} `{t}` is not a number"))
+        };
+        let shape = match (parts[0].to_ascii_lowercase().as_str(), parts.len()) {
+            ("ball", 2) => ToolShape::Ball {
+                diameter_mm: num(1, "diameter (mm)")?,
+            },
+            ("flat", 2) => ToolShape::Flat {
+                diameter_mm: num(1, "diameter (mm)")?,
+            },
+            ("bull", 3) => ToolShape::Bull {
+                diameter_mm: num(1, "diameter (mm)")?,
+                corner_radius_mm: num(2, "corner radius (mm)")?,
+            },
+            _ => return Err(format!("tool `{s}`: expected ball:D, flat:D or bull:D:R (mm)")),
+        };
+        shape.validate()?;
+        Ok(shape)
+    }
+
+    /// Check the dimensions; the error names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let d = self.diameter_mm();
+        if !(d.is_finite() && d > 0.0) {
+            return Err(format!("tool diameter_mm must be positive, got {d}"));
+        }
+        if let ToolShape::Bull {
+            corner_radius_mm: rc, ..
+        } = *self
+        {
+            if !(rc.is_finite() && rc > 0.0 && rc <= d / 2.0) {
+                return Err(format!(
+                    "bull-nose corner_radius_mm must be in (0, diameter/2 = {}], got {rc}",
+                    d / 2.0
+                ));
+            }
+        }
+        Ok(())
+    }
+
+    /// Diameter, mm.
+    pub fn diameter_mm(&self) -> f64 {
+        match *self {
+            ToolShape::Ball { diameter_mm } | ToolShape::Flat { diameter_mm } | ToolShape::Bull { diameter_mm, .. } => {
+                diameter_mm
+            }
+        }
+    }
+
+    /// Radius, mm.
+    pub fn radius_mm(&self) -> f64 {
+        self.diameter_mm() / 2.0
+    }
+
+    /// The shape as the sweep sees it (a bull whose corner is half the diameter is a ball).
+    pub fn bit(&self) -> Bit {
+        let r = self.radius_mm();
+        match *self {
+            ToolShape::Ball { .. } => Bit::Ball { r },
+            ToolShape::Flat { .. } => Bit::Flat { r },
+            ToolShape::Bull { corner_radius_mm, .. } if corner_radius_mm >= r => Bit::Ball { r },
+            ToolShape::Bull { corner_radius_mm, .. } => Bit::Bull {
+                r,
+                rc: corner_radius_mm,
+            },
+        }
+    }
+}
+
+impl std::fmt::Display for ToolShape {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            ToolShape::Ball { diameter_mm } => write!(f, "ball:{diameter_mm}"),
+            ToolShape::Flat { diameter_mm } => write!(f, "flat:{diameter_mm}"),
+            ToolShape::Bull {
+                diameter_mm,
+                corner_radius_mm,
+            } => write!(f, "bull:{diameter_mm}:{corner_radius_mm}"),
+        }
+    }
+}
+
+/// Configuration of the simulation. Lengths carry their unit in the name.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimulateConfig {
+    /// The bit.
+    pub tool: ToolShape,
+    /// Stock grid pitch, µm.
+    pub pitch_um: f64,
+    /// Stock bounds `[x0, y0, x1, y1]`, mm; None: the XY extents of the moves that reach below the stock top
+    /// (of all moves when none does; of the start point when nothing moves), plus the tool radius, on
+    /// multiples of the pitch.
+    pub bounds_mm: Option<[f64; 4]>,
+    /// Height of the stock top, mm (DESIGN.md: z = 0).
+    pub stock_top_mm: f64,
+    /// Largest chord sagitta when arcs are linearised, µm.
+    pub arc_tolerance_um: f64,
+    /// Tool-tip position before the first move, mm (LinuxCNC's interpreter starts at the origin).
+    pub start_mm: [f64; 3],
+    /// Refuse a stock grid of more cells than this (8 bytes each; 250 M cells is 2 GB).
+    pub max_cells: usize,
+    /// Refuse a program that expands to more linear segments than this.
+    pub max_segments: usize,
+    /// Flute length, mm: a move whose tip goes deeper than this below the stock top is refused (the shank
+    /// would rub). 0: not checked.
+    pub flute_length_mm: f64,
+    /// Machine limits for the time estimate; None: `machines/linuxcnc-mill.toml`.
+    pub machine: Option<Machine>,
+}
+
+impl Default for SimulateConfig {
+    fn default() -> Self {
+        Self {
+            tool: ToolShape::default(),
+            pitch_um: 5.0,
+            bounds_mm: None,
+            stock_top_mm: 0.0,
+            arc_tolerance_um: 0.1,
+            start_mm: [0.0; 3],
+            max_cells: 250_000_000,
+            max_segments: 50_000_000,
+            flute_length_mm: 0.0,
+            machine: None,
+        }
+    }
+}
+
+impl SimulateConfig {
+    /// Check every field; the error names it.
+    pub fn validate(&self) -> Result<(), SimulateError> {
+        let bad = |s: String| Err(SimulateError::Config(s));
+        self.tool.validate().map_err(SimulateError::Config)?;
+        let p = self.pitch_um;
+        if !(p.is_finite() && p > 0.0) {
+            return bad(format!("pitch_um must be positive, got {p}"));
+        }
+        if self.tool.diameter_mm() < 2.0 * p * 1e-3 {
+            return bad(format!(
+                "the tool ({} mm) is smaller than two cells of pitch_um = {p}: the grid cannot resolve it",
+                self.tool.diameter_mm()
+            ));
+        }
+        if !(self.arc_tolerance_um.is_finite() && self.arc_tolerance_um > 0.0) {
+            return bad(format!(
+                "arc_tolerance_um must be positive, got {}",
+                self.arc_tolerance_um
+            ));
+        }
+        if !self.stock_top_mm.is_finite() || self.start_mm.iter().any(|v| !v.is_finite()) {
+            return bad("stock_top_mm and start_mm must be finite".into());
+        }
+        if let Some([x0, y0, x1, y1]) = self.bounds_mm {
+            if !([x0, y0, x1, y1].iter().all(|v| v.is_finite()) && x1 > x0 && y1 > y0) {
+                return bad(format!(
+                    "bounds_mm must be x0,y0,x1,y1 with x1 > x0 and y1 > y0, got {x0},{y0},{x1},{y1}"
+                ));
+            }
+        }
+        if self.flute_length_mm.is_nan() || self.flute_length_mm < 0.0 {
+            return bad(format!("flute_length_mm must be ≥ 0, got {}", self.flute_length_mm));
+        }
+        Ok(())
+    }
+}
+
+/// Errors of the simulation.
+#[derive(Debug, thiserror::Error)]
+pub enum SimulateError {
+    /// The program uses something the reader does not understand (with line and column).
+    #[error("{0}")]
+    Gcode(#[from] gcode::GcodeError),
+    /// A configuration value is out of range.
+    #[error("simulate config: {0}")]
+    Config(String),
+    /// A stock, tool or program limit would be exceeded.
+    #[error("refused: {0}")]
+    Limit(String),
+}
+
+/// The simulation in numbers.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct SimStats {
+    /// Material removed from the stock, mm³ (sum over cells of depth below the top × pitch²).
+    pub removed_volume_mm3: f64,
+    /// Estimated machining time, s (feeds, acceleration, junction deviation; see [`SimStats::machine`]).
+    pub estimated_s: f64,
+    /// The machine profile whose limits the estimate used.
+    pub machine: String,
+    /// Motion commands that moved (G0/G1/G2/G3 blocks).
+    pub moves: usize,
+    /// Arc commands among them.
+    pub arcs: usize,
+    /// Linear segments swept (arcs split into chords).
+    pub segments: usize,
+    /// Segments that reach below the stock top over the stock.
+    pub cutting_segments: usize,
+    /// (segment, cell) evaluations: the cells under each segment's footprint, summed.
+    pub swept_cells: u64,
+    /// Rapid (G0) moves that removed material — a crash on a real machine.
+    pub rapid_cuts: usize,
+    /// Program lines of the first few of those.
+    pub rapid_cut_lines: Vec<usize>,
+    /// Lines read.
+    pub lines: usize,
+    /// Whether the program used inches (converted to mm).
+    pub inch: bool,
+    /// Stock grid cells `[nx, ny]`.
+    pub cells: [usize; 2],
+    /// Stock grid pitch, mm.
+    pub pitch_mm: f64,
+    /// Stock bounds `[x0, y0, x1, y1]`, mm.
+    pub bounds_mm: [f64; 4],
+    /// Lowest point of the simulated surface, mm.
+    pub min_z_mm: f64,
+    /// Cutting (G1 and arc) path length, mm.
+    pub feed_length_mm: f64,
+    /// Rapid path length, mm.
+    pub rapid_length_mm: f64,
+    /// Largest chord sagitta of the arcs' linearisation, µm.
+    pub arc_tolerance_um: f64,
+}
+
+/// A simulated cut.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Simulation {
+    /// The milled surface, mm (non-periodic).
+    pub heightfield: Heightfield,
+    /// Work x, y of the grid's lower-left corner, mm: cell `(i, j)` is centred at
+    /// `origin + ((i + ½)·pitch, (j + ½)·pitch)`.
+    pub origin_mm: [f64; 2],
+    /// The numbers.
+    pub stats: SimStats,
+}
+
+impl Simulation {
+    /// Work coordinates of the centre of cell `(i, j)`, mm.
+    pub fn cell_xy(&self, i: usize, j: usize) -> [f64; 2] {
+        let p = self.heightfield.pitch_mm;
+        [
+            self.origin_mm[0] + (i as f64 + 0.5) * p,
+            self.origin_mm[1] + (j as f64 + 0.5) * p,
+        ]
+    }
+}
+
+/// The limits assumed when no machine profile is given.
+pub fn default_machine() -> Option<Machine> {
+    Machine::parse(include_str!("../../machines/linuxcnc-mill.toml")).ok()
+}
+
+/// Parse options from a configuration.
+pub fn parse_options(cfg: &SimulateConfig) -> ParseOptions {
+    ParseOptions {
+        arc_tolerance_mm: cfg.arc_tolerance_um * 1e-3,
+        start_mm: cfg.start_mm,
+        max_segments: cfg.max_segments,
+    }
+}
+
+/// Parse and simulate a program held in memory.
+pub fn run(program: &str, cfg: &SimulateConfig) -> Result<Simulation, SimulateError> {
+    cfg.validate()?;
+    let prog = gcode::parse(program, &parse_options(cfg))?;
+    simulate(&prog, cfg)
+}
+
+/// The stock grid of a program under a configuration (bounds given, or the cutting extents plus the tool
+/// radius on multiples of the pitch), checked against the cell limit.
+pub fn stock_grid(prog: &Program, cfg: &SimulateConfig) -> Result<stock::Grid, SimulateError> {
+    let p = cfg.pitch_um * 1e-3;
+    let r = cfg.tool.radius_mm();
+    let (x0, y0, x1, y1) = match cfg.bounds_mm {
+        Some([a, b, c, d]) => (a, b, c, d),
+        None => {
+            let below: Vec<_> = prog
+                .segments
+                .iter()
+                .filter(|s| s.from[2].min(s.to[2]) < cfg.stock_top_mm)
+                .collect();
+            let pick: Vec<_> = if below.is_empty() {
+                prog.segments.iter().collect()
+            } else {
+                below
+            };
+            // a program that never moves leaves the stock under the tool at its start point
+            let start = [cfg.start_mm, cfg.start_mm];
+            let mut b = [f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY];
+            let ends: Vec<[P3; 2]> = if pick.is_empty() {
+                vec![start]
+            } else {
+                pick.iter().map(|s| [s.from, s.to]).collect()
+            };
+            for e in ends {
+                for q in e {
+                    b = [b[0].min(q[0]), b[1].min(q[1]), b[2].max(q[0]), b[3].max(q[1])];
+                }
+            }
+            (
+                ((b[0] - r) / p).floor() * p,
+                ((b[1] - r) / p).floor() * p,
+                ((b[2] + r) / p).ceil() * p,
+                ((b[3] + r) / p).ceil() * p,
+            )
+        }
+    };
+    let nx = ((x1 - x0) / p - 1e-9).ceil().max(1.0);
+    let ny = ((y1 - y0) / p - 1e-9).ceil().max(1.0);
+    if nx * ny > cfg.max_cells as f64 {
+        return Err(SimulateError::Limit(format!(
+            "a stock of {:.3} × {:.3} mm at {} µm is {nx} × {ny} = {:.0} cells, above the limit of {} cells \
+             (max_cells); use a coarser pitch or smaller bounds",
+            x1 - x0,
+            y1 - y0,
+            cfg.pitch_um,
+            nx * ny,
+            cfg.max_cells
+        )));
+    }
+    Ok(stock::Grid {
+        x0,
+        y0,
+        pitch: p,
+        nx: nx as usize,
+        ny: ny as usize,
+    })
+}
+
+/// Simulate a program already read.
+pub fn simulate(prog: &Program, cfg: &SimulateConfig) -> Result<Simulation, SimulateError> {
+    cfg.validate()?;
+    if cfg.flute_length_mm > 0.0 {
+        let floor = cfg.stock_top_mm - cfg.flute_length_mm;
+        if let Some(s) = prog.segments.iter().find(|s| s.from[2].min(s.to[2]) < floor - 1e-9) {
+            return Err(SimulateError::Limit(format!(
+                "line {}: the tip reaches {:.4} mm below the stock top, deeper than the flute length {} mm",
+                s.line,
+                cfg.stock_top_mm - s.from[2].min(s.to[2]),
+                cfg.flute_length_mm
+            )));
+        }
+    }
+    let grid = stock_grid(prog, cfg)?;
+    let top = cfg.stock_top_mm;
+    let (z, rep) = stock::sweep(&grid, top, cfg.tool.bit(), &prog.segments);
+    let area = grid.pitch * grid.pitch;
+    let removed: f64 = z.iter().map(|v| (top - v).max(0.0)).sum::<f64>() * area;
+    let min_z = z.iter().copied().fold(f64::INFINITY, f64::min);
+    let machine = cfg.machine.clone().or_else(default_machine);
+    let (estimated_s, machine_name) = match &machine {
+        Some(m) => (
+            crate::toolpath::estimate::estimate_s(&prog.moves, cfg.start_mm, m),
+            if cfg.machine.is_some() {
+                m.name.clone()
+            } else {
+                format!("{} (machines/linuxcnc-mill.toml, assumed)", m.name)
+            },
+        ),
+        None => (f64::NAN, "none".into()),
+    };
+    let len = crate::toolpath::moves::lengths(&prog.moves, cfg.start_mm);
+    let stats = SimStats {
+        removed_volume_mm3: removed,
+        estimated_s,
+        machine: machine_name,
+        moves: prog.motions,
+        arcs: prog.arcs,
+        segments: prog.segments.len(),
+        cutting_segments: rep.cutting_segments,
+        swept_cells: rep.swept_cells,
+        rapid_cuts: rep.rapid_cuts.len(),
+        rapid_cut_lines: rep
+            .rapid_cuts
+            .iter()
+            .take(10)
+            .map(|&k| prog.segments[k].line as usize)
+            .collect(),
+        lines: prog.lines,
+        inch: prog.inch,
+        cells: [grid.nx, grid.ny],
+        pitch_mm: grid.pitch,
+        bounds_mm: [
+            grid.x0,
+            grid.y0,
+            grid.x0 + grid.nx as f64 * grid.pitch,
+            grid.y0 + grid.ny as f64 * grid.pitch,
+        ],
+        min_z_mm: min_z,
+        feed_length_mm: len.feed_mm,
+        rapid_length_mm: len.rapid_mm,
+        arc_tolerance_um: cfg.arc_tolerance_um,
+    };
+    Ok(Simulation {
+        heightfield: Heightfield {
+            nx: grid.nx,
+            ny: grid.ny,
+            pitch_mm: grid.pitch,
+            periodic: false,
+            z_mm: z,
+        },
+        origin_mm: [grid.x0, grid.y0],
+        stats,
+    })
+}
+
+/// The simulated surface as a closed solid for STL: the top through every `stride`-th cell centre (the stride
+/// chosen so that at most `max_side` samples lie along either side), vertical sides and a flat bottom
+/// `base_mm` below the lowest point. Coordinates in work mm.
+pub fn solid(sim: &Simulation, max_side: usize, base_mm: f64) -> Vec<crate::facets::stl::Triangle> {
+    use crate::geometry::Vec3;
+    let hf = &sim.heightfield;
+    let f = hf.nx.max(hf.ny).div_ceil(max_side.max(2)).max(1);
+    let is: Vec<usize> = (0..hf.nx).step_by(f).chain(std::iter::once(hf.nx - 1)).collect();
+    let js: Vec<usize> = (0..hf.ny).step_by(f).chain(std::iter::once(hf.ny - 1)).collect();
+    let dedup = |mut v: Vec<usize>| {
+        v.dedup();
+        v
+    };
+    let (is, js) = (dedup(is), dedup(js));
+    let (lo, _) = hf.range();
+    let zb = lo - base_mm.abs().max(1e-3);
+    let top = |a: usize, b: usize| {
+        let [x, y] = sim.cell_xy(is[a], js[b]);
+        Vec3::new(x, y, hf.at(is[a], js[b]))
+    };
+    let bot = |a: usize, b: usize| {
+        let [x, y] = sim.cell_xy(is[a], js[b]);
+        Vec3::new(x, y, zb)
+    };
+    let (w, h) = (is.len(), js.len());
+    let mut t = Vec::with_capacity(2 * (w - 1) * (h - 1) + 4 * (w + h) + 8);
+    for b in 0..h.saturating_sub(1) {
+        for a in 0..w.saturating_sub(1) {
+            t.push([top(a, b), top(a + 1, b), top(a + 1, b + 1)]);
+            t.push([top(a, b), top(a + 1, b + 1), top(a, b + 1)]);
+        }
+    }
+    // the boundary, counter-clockwise seen from above
+    let mut ring: Vec<(usize, usize)> = vec![];
+    ring.extend((0..w).map(|a| (a, 0)));
+    ring.extend((1..h).map(|b| (w - 1, b)));
+    ring.extend((0..w - 1).rev().map(|a| (a, h - 1)));
+    ring.extend((1..h - 1).rev().map(|b| (0, b)));
+    for k in 0..ring.len() {
+        let (p, q) = (ring[k], ring[(k + 1) % ring.len()]);
+        // outward side wall: seen from outside, p→q runs left to right along the top
+        t.push([bot(p.0, p.1), bot(q.0, q.1), top(q.0, q.1)]);
+        t.push([bot(p.0, p.1), top(q.0, q.1), top(p.0, p.1)]);
+    }
+    // bottom: a fan from its centre, facing down
+    let c = ring.iter().fold(Vec3::zeros(), |s, &(a, b)| s + bot(a, b)) / ring.len() as f64;
+    for k in 0..ring.len() {
+        let (p, q) = (ring[k], ring[(k + 1) % ring.len()]);
+        t.push([c, bot(q.0, q.1), bot(p.0, p.1)]);
+    }
+    t.retain(|tri| (tri[1] - tri[0]).cross(&(tri[2] - tri[0])).norm() > 0.0);
+    t
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tool_specs() {
+        assert_eq!(
+            ToolShape::parse("ball:1.0").unwrap(),
+            ToolShape::Ball { diameter_mm: 1.0 }
+        );
+        assert_eq!(
+            ToolShape::parse("flat:3").unwrap(),
+            ToolShape::Flat { diameter_mm: 3.0 }
+        );
+        assert_eq!(
+            ToolShape::parse("bull:6:0.5").unwrap(),
+            ToolShape::Bull {
+                diameter_mm: 6.0,
+                corner_radius_mm: 0.5
+            }
+        );
+        for bad in ["ball", "ball:x", "ball:-1", "bull:2:1.5", "cone:1", "flat:1:2", ""] {
+            assert!(ToolShape::parse(bad).is_err(), "{bad}");
+        }
+        let t = ToolShape::parse("bull:6:0.5").unwrap();
+        assert_eq!(ToolShape::parse(&t.to_string()).unwrap(), t);
+    }
+
+    #[test]
+    fn limits_are_refused_with_a_message() {
+        let prog = "G0 X0 Y0 Z1\nG1 Z-1 F100\nX100 Y100\n";
+        let cfg = SimulateConfig {
+            pitch_um: 1.0,
+            ..Default::default()
+        };
+        let e = run(prog, &cfg).unwrap_err();
+        assert!(e.to_string().contains("max_cells"), "{e}");
+        let cfg = SimulateConfig {
+            pitch_um: 100.0,
+            flute_length_mm: 0.5,
+            ..Default::default()
+        };
+        let e = run(prog, &cfg).unwrap_err();
+        assert!(
+            e.to_string().contains("line 2") && e.to_string().contains("flute"),
+            "{e}"
+        );
+        let e = run("G0 X0\nG1 X1\n", &SimulateConfig::default()).unwrap_err();
+        assert!(e.to_string().starts_with("line 2, column 1"), "{e}");
+    }
+
+    #[test]
+    fn moves_outside_the_stock_and_rapid_cuts() {
+        let cfg = SimulateConfig {
+            pitch_um: 20.0,
+            bounds_mm: Some([0.0, 0.0, 2.0, 2.0]),
+            ..Default::default()
+        };
+        // a feed far away, a rapid through the stock
+        let s = run(
+            "G0 X50 Y50 Z1\nG1 Z-1 F100\nX60\nG0 Z1\nX1.01 Y1.01\nG0 Z-0.1\nG0 Z1\n",
+            &cfg,
+        )
+        .unwrap();
+        assert_eq!(s.stats.rapid_cuts, 1);
+        assert_eq!(s.stats.rapid_cut_lines, vec![6]);
+        let (lo, _) = s.heightfield.range();
+        assert!((lo + 0.1).abs() < 1e-12, "{lo} {:?}", s.stats);
+        assert!(s.stats.estimated_s > 0.0 && s.stats.machine.contains("assumed"));
+    }
+
+    #[test]
+    fn stl_solid_is_closed_with_the_right_volume() {
+        let cfg = SimulateConfig {
+            pitch_um: 20.0,
+            ..Default::default()
+        };
+        let s = run("G0 X0 Y0 Z1\nG1 Z-0.3 F100\nX2 Y0.5\nG0 Z1\n", &cfg).unwrap();
+        for max_side in [8, 1000] {
+            let t = solid(&s, max_side, 1.0);
+            let mut edges = std::collections::HashMap::<([i64; 3], [i64; 3]), i64>::new();
+            let key = |v: &crate::geometry::Vec3| {
+                [
+                    (v.x * 1e7).round() as i64,
+                    (v.y * 1e7).round() as i64,
+                    (v.z * 1e7).round() as i64,
+                ]
+            };
+            for tri in &t {
+                for k in 0..3 {
+                    *edges.entry((key(&tri[k]), key(&tri[(k + 1) % 3]))).or_default() += 1;
+                    *edges.entry((key(&tri[(k + 1) % 3]), key(&tri[k]))).or_default() -= 1;
+                }
+            }
+            assert!(edges.values().all(|c| *c == 0), "open mesh at max_side {max_side}");
+            let v = crate::facets::stl::volume(&t);
+            assert!(v > 0.0);
+            if max_side == 1000 {
+                // full resolution: the volume of the cell-centre surface over the base
+                let hf = &s.heightfield;
+                let (lo, _) = hf.range();
+                let zb = lo - 1.0;
+                let p = hf.pitch_mm;
+                let mut expect = 0.0;
+                for j in 0..hf.ny - 1 {
+                    for i in 0..hf.nx - 1 {
+                        // two triangles: mean of their vertex heights
+                        let t1 = (hf.at(i, j) + hf.at(i + 1, j) + hf.at(i + 1, j + 1)) / 3.0;
+                        let t2 = (hf.at(i, j) + hf.at(i + 1, j + 1) + hf.at(i, j + 1)) / 3.0;
+                        expect += p * p / 2.0 * (t1 + t2 - 2.0 * zb);
+                    }
+                }
+                assert!((v - expect).abs() < 1e-9 * expect, "{v} vs {expect}");
+            }
+        }
+    }
+}

@@ -1,0 +1,485 @@
+//! The simulated surface against the design: what was left above it, what was cut below it, and where no
+//! program with this bit could have followed it.
+//!
+//! The design is a tile repeated from the work origin `(0, 0)` (sample `(k, l)` at `((k + ½)·p, (l + ½)·p)`),
+//! read at the stock's cell centres by bilinear interpolation. **Reach** is a property of the design and the
+//! bit alone: the best any raster of this bit can leave, however fine, is the design's *opening* by the bit —
+//! the erosion of the drop-cutter CL surface, `O(x) = min_{|u| ≤ R} CL(x + u) + prof(|u|)` with
+//! `CL(x) = max_{|u| ≤ R} h(x + u) − prof(|u|)` (DESIGN.md §4), both over the design's samples. Where `O`
+//! stands above the design by more than [`REACH_TOLERANCE_UM`] at any of the four samples around a cell,
+//! the cell is *unreachable* (a concave corner narrower than the bit). The tolerance covers the sampling of
+//! the opening itself: a ball touching a sloped design between samples sits up to `p²(1 + s²)^{3/2} / (8r)`
+//! above it (0.07 µm for a 1 mm ball at 10 µm pitch and slope 1).
+//!
+//! Only the interior is assessed: cells at least twice the tool radius plus one cell from the stock's edge.
+//! The default stock is the tool-centre extents plus one radius, and the opening at a cell may rest on a bit
+//! centred up to a radius away from it — a position the program can only have visited if it lies within its
+//! extents.
+
+use super::{Simulation, ToolShape};
+use crate::heightfield::Heightfield;
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+/// Height of the opening above the design beyond which a sample counts as unreachable, µm.
+pub const REACH_TOLERANCE_UM: f64 = 0.25;
+
+/// A largest value and where it is.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Extreme {
+    /// The value, µm.
+    pub um: f64,
+    /// Work `[x, y]` of the cell, mm.
+    pub at_mm: [f64; 2],
+}
+
+impl Extreme {
+    fn none() -> Self {
+        Self {
+            um: f64::NEG_INFINITY,
+            at_mm: [f64::NAN; 2],
+        }
+    }
+    fn take(&mut self, um: f64, at: [f64; 2]) {
+        if um > self.um {
+            *self = Self { um, at_mm: at };
+        }
+    }
+    fn max(self, o: Self) -> Self {
+        if o.um > self.um {
+            o
+        } else {
+            self
+        }
+    }
+}
+
+/// The simulated surface against the design, over the stock's grid.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Deviation {
+    /// Grid cells along x (the simulation's).
+    pub nx: usize,
+    /// Grid cells along y.
+    pub ny: usize,
+    /// Cell side, mm.
+    pub pitch_mm: f64,
+    /// Work x, y of the grid's lower-left corner, mm.
+    pub origin_mm: [f64; 2],
+    /// Simulated minus design height per cell, µm, row-major; NaN outside the assessed interior.
+    #[serde(skip)]
+    pub map_um: Vec<f32>,
+    /// Per cell: the bit cannot reach the design there (see the module comment).
+    #[serde(skip)]
+    pub unreachable: Vec<bool>,
+    /// Distance from the stock edge within which cells are not assessed, mm.
+    pub interior_margin_mm: f64,
+    /// Cells assessed.
+    pub interior_cells: usize,
+    /// Assessed cells that are unreachable.
+    pub unreachable_cells: usize,
+    /// `unreachable_cells / interior_cells`.
+    pub unreachable_fraction: f64,
+    /// Reach tolerance used, µm.
+    pub reach_tolerance_um: f64,
+    /// Largest height of material left above the design, µm (negative: every cell is below it).
+    pub max_over_um: f64,
+    /// Where, work mm.
+    pub max_over_at_mm: [f64; 2],
+    /// Largest depth cut below the design (a gouge), µm (negative: every cell is above it).
+    pub max_under_um: f64,
+    /// Where, work mm.
+    pub max_under_at_mm: [f64; 2],
+    /// Largest height left above the design where it is reachable, µm.
+    pub max_over_reachable_um: f64,
+    /// Where, work mm.
+    pub max_over_reachable_at_mm: [f64; 2],
+    /// Largest height left above the opening (what an infinitely fine raster of this bit leaves), µm.
+    pub max_above_opening_um: f64,
+    /// Where, work mm.
+    pub max_above_opening_at_mm: [f64; 2],
+    /// Root mean square of simulated − design over the reachable cells, µm.
+    pub rms_reachable_um: f64,
+}
+
+/// The design (and its opening) over a window of its samples, non-periodic, or the whole periodic tile.
+struct Window {
+    nx: usize,
+    ny: usize,
+    /// Design sample index of the window's column 0 / row 0 (the window's samples are the design's).
+    k0: i64,
+    l0: i64,
+    periodic: bool,
+    pitch: f64,
+    h: Vec<f64>,
+    open: Vec<f64>,
+}
+
+impl Window {
+    /// Indices of the four samples around work `(x, y)` and the bilinear weights, None outside the window.
+    #[inline]
+    fn corners(&self, x: f64, y: f64) -> Option<([usize; 4], f64, f64)> {
+        let (fx, fy) = (x / self.pitch - 0.5, y / self.pitch - 0.5);
+        let (ix, iy) = (fx.floor(), fy.floor());
+        let (tx, ty) = (fx - ix, fy - iy);
+        let (i, j) = (ix as i64 - self.k0, iy as i64 - self.l0);
+        let (nx, ny) = (self.nx as i64, self.ny as i64);
+        let idx = |a: i64, b: i64| -> Option<usize> {
+            if self.periodic {
+                Some((b.rem_euclid(ny) * nx + a.rem_euclid(nx)) as usize)
+            } else if a < 0 || b < 0 || a >= nx || b >= ny {
+                None
+            } else {
+                Some((b * nx + a) as usize)
+            }
+        };
+        Some(([idx(i, j)?, idx(i + 1, j)?, idx(i, j + 1)?, idx(i + 1, j + 1)?], tx, ty))
+    }
+}
+
+#[inline]
+fn bilinear(v: &[f64], c: [usize; 4], tx: f64, ty: f64) -> f64 {
+    (1.0 - ty) * ((1.0 - tx) * v[c[0]] + tx * v[c[1]]) + ty * ((1.0 - tx) * v[c[2]] + tx * v[c[3]])
+}
+
+/// `out(x) = max_{|u| ≤ R} z(x + u) − prof(|u|)` over a grid (the drop-cutter dilation, DESIGN.md §4), rows
+/// in parallel; with `periodic` the grid wraps, otherwise samples beyond it are absent.
+fn dilate(z: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &ToolShape) -> Vec<f64> {
+    let bit = tool.bit();
+    let r = bit.radius();
+    let m = (r / pitch).ceil() as usize + 1;
+    let mi = m as i64;
+    // offsets (dj, [(di, -prof)])
+    let rows: Vec<(i64, Vec<(i64, f64)>)> = (-mi..=mi)
+        .map(|dj| {
+            let dy = dj as f64 * pitch;
+            let offs = (-mi..=mi)
+                .filter_map(|di| {
+                    let dx = di as f64 * pitch;
+                    let d2 = dx * dx + dy * dy;
+                    (d2 <= r * r * (1.0 + 1e-12)).then(|| (di, -bit.profile(d2.sqrt().min(r))))
+                })
+                .collect::<Vec<_>>();
+            (dj, offs)
+        })
+        .filter(|(_, o)| !o.is_empty())
+        .collect();
+    let mut out = vec![f64::NEG_INFINITY; nx * ny];
+    out.par_chunks_mut(nx).enumerate().for_each_init(
+        || vec![0.0; nx + 2 * m],
+        |buf, (j, orow)| {
+            for (dj, offs) in &rows {
+                let jj = j as i64 + dj;
+                let jj = if periodic {
+                    jj.rem_euclid(ny as i64) as usize
+                } else if jj < 0 || jj >= ny as i64 {
+                    continue;
+                } else {
+                    jj as usize
+                };
+                let src = &z[jj * nx..(jj + 1) * nx];
+                for (k, v) in buf.iter_mut().enumerate() {
+                    let i = k as i64 - mi;
+                    *v = if periodic {
+                        src[i.rem_euclid(nx as i64) as usize]
+                    } else if i < 0 || i >= nx as i64 {
+                        f64::NEG_INFINITY
+                    } else {
+                        src[i as usize]
+                    };
+                }
+                for &(di, b) in offs {
+                    let s = &buf[(mi + di) as usize..(mi + di) as usize + nx];
+                    for (o, v) in orow.iter_mut().zip(s) {
+                        let c = v + b;
+                        if c > *o {
+                            *o = c;
+                        }
+                    }
+                }
+            }
+        },
+    );
+    out
+}
+
+/// The opening of a design grid by the bit: erosion of its CL surface (module comment).
+fn opening(h: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &ToolShape) -> Vec<f64> {
+    let cl = dilate(h, nx, ny, pitch, periodic, tool);
+    let neg: Vec<f64> = cl.iter().map(|v| -v).collect();
+    dilate(&neg, nx, ny, pitch, periodic, tool)
+        .into_iter()
+        .map(|v| -v)
+        .collect()
+}
+
+/// Compare a simulation with the design tile (periodic, repeated from the work origin; a non-periodic design
+/// is placed once at the origin and cells beyond it are not assessed). An invalid design assesses nothing.
+pub fn deviation(sim: &Simulation, design: &Heightfield, tool: &ToolShape) -> Deviation {
+    let hf = &sim.heightfield;
+    let p = hf.pitch_mm;
+    let r = tool.radius_mm();
+    let margin = 2.0 * r + p;
+    let mut dev = Deviation {
+        nx: hf.nx,
+        ny: hf.ny,
+        pitch_mm: p,
+        origin_mm: sim.origin_mm,
+        map_um: vec![f32::NAN; hf.nx * hf.ny],
+        unreachable: vec![false; hf.nx * hf.ny],
+        interior_margin_mm: margin,
+        interior_cells: 0,
+        unreachable_cells: 0,
+        unreachable_fraction: f64::NAN,
+        reach_tolerance_um: REACH_TOLERANCE_UM,
+        max_over_um: f64::NAN,
+        max_over_at_mm: [f64::NAN; 2],
+        max_under_um: f64::NAN,
+        max_under_at_mm: [f64::NAN; 2],
+        max_over_reachable_um: f64::NAN,
+        max_over_reachable_at_mm: [f64::NAN; 2],
+        max_above_opening_um: f64::NAN,
+        max_above_opening_at_mm: [f64::NAN; 2],
+        rms_reachable_um: f64::NAN,
+    };
+    if design.check_invariants().is_err() || tool.validate().is_err() {
+        return dev;
+    }
+    // interior cells
+    let (i_lo, i_hi) = ((margin / p - 0.5).ceil() as usize, hf.nx as f64 - 0.5 - margin / p);
+    let (j_lo, j_hi) = ((margin / p - 0.5).ceil() as usize, hf.ny as f64 - 0.5 - margin / p);
+    if i_hi < i_lo as f64 || j_hi < j_lo as f64 {
+        return dev;
+    }
+    let (i_hi, j_hi) = (i_hi.floor() as usize, j_hi.floor() as usize);
+    // the design window: the interior plus two tool radii (CL needs one, the opening another)
+    let pd = design.pitch_mm;
+    let [x_lo, y_lo] = sim.cell_xy(i_lo, j_lo);
+    let [x_hi, y_hi] = sim.cell_xy(i_hi, j_hi);
+    let pad = 2.0 * r + 2.0 * pd;
+    let (mut k0, mut l0) = (((x_lo - pad) / pd).floor() as i64, ((y_lo - pad) / pd).floor() as i64);
+    let (mut k1, mut l1) = (((x_hi + pad) / pd).ceil() as i64, ((y_hi + pad) / pd).ceil() as i64);
+    let periodic_whole = design.periodic && (k1 - k0 + 1) * (l1 - l0 + 1) >= (design.nx * design.ny) as i64;
+    if !design.periodic {
+        k0 = k0.max(0);
+        l0 = l0.max(0);
+        k1 = k1.min(design.nx as i64 - 1);
+        l1 = l1.min(design.ny as i64 - 1);
+        if k1 < k0 || l1 < l0 {
+            return dev;
+        }
+    }
+    let mut win = if periodic_whole {
+        Window {
+            nx: design.nx,
+            ny: design.ny,
+            k0: 0,
+            l0: 0,
+            periodic: true,
+            pitch: pd,
+            h: design.z_mm.clone(),
+            open: vec![],
+        }
+    } else {
+        let (wn, hn) = ((k1 - k0 + 1) as usize, (l1 - l0 + 1) as usize);
+        let mut h = vec![0.0; wn * hn];
+        for (l, row) in h.chunks_mut(wn).enumerate() {
+            for (k, v) in row.iter_mut().enumerate() {
+                let (a, b) = (k as i64 + k0, l as i64 + l0);
+                *v = design.at(
+                    a.rem_euclid(design.nx as i64) as usize,
+                    b.rem_euclid(design.ny as i64) as usize,
+                );
+            }
+        }
+        Window {
+            nx: wn,
+            ny: hn,
+            k0,
+            l0,
+            periodic: false,
+            pitch: pd,
+            h,
+            open: vec![],
+        }
+    };
+    win.open = opening(&win.h, win.nx, win.ny, pd, win.periodic, tool);
+    let tol_mm = REACH_TOLERANCE_UM * 1e-3;
+
+    #[derive(Clone, Copy)]
+    struct Acc {
+        n: usize,
+        unreach: usize,
+        over: Extreme,
+        under: Extreme,
+        over_r: Extreme,
+        above_open: Extreme,
+        ss: f64,
+        nr: usize,
+    }
+    let zero = Acc {
+        n: 0,
+        unreach: 0,
+        over: Extreme::none(),
+        under: Extreme::none(),
+        over_r: Extreme::none(),
+        above_open: Extreme::none(),
+        ss: 0.0,
+        nr: 0,
+    };
+    let nx = hf.nx;
+    let acc = dev
+        .map_um
+        .par_chunks_mut(nx)
+        .zip(dev.unreachable.par_chunks_mut(nx))
+        .enumerate()
+        .filter(|(j, _)| (j_lo..=j_hi).contains(j))
+        .map(|(j, (mrow, urow))| {
+            let mut a = zero;
+            for i in i_lo..=i_hi {
+                let at = sim.cell_xy(i, j);
+                let Some((c, tx, ty)) = win.corners(at[0], at[1]) else {
+                    continue;
+                };
+                let zd = bilinear(&win.h, c, tx, ty);
+                let zo = bilinear(&win.open, c, tx, ty);
+                let unreachable = c.iter().any(|&k| win.open[k] - win.h[k] > tol_mm);
+                let zs = hf.at(i, j);
+                let d = (zs - zd) * 1e3;
+                mrow[i] = d as f32;
+                urow[i] = unreachable;
+                a.n += 1;
+                a.over.take(d, at);
+                a.under.take(-d, at);
+                a.above_open.take((zs - zo) * 1e3, at);
+                if unreachable {
+                    a.unreach += 1;
+                } else {
+                    a.over_r.take(d, at);
+                    a.ss += d * d;
+                    a.nr += 1;
+                }
+            }
+            a
+        })
+        .reduce(
+            || zero,
+            |a, b| Acc {
+                n: a.n + b.n,
+                unreach: a.unreach + b.unreach,
+                over: a.over.max(b.over),
+                under: a.under.max(b.under),
+                over_r: a.over_r.max(b.over_r),
+                above_open: a.above_open.max(b.above_open),
+                ss: a.ss + b.ss,
+                nr: a.nr + b.nr,
+            },
+        );
+    if acc.n == 0 {
+        return dev;
+    }
+    let fin = |e: Extreme| {
+        if e.um.is_finite() {
+            (e.um, e.at_mm)
+        } else {
+            (f64::NAN, [f64::NAN; 2])
+        }
+    };
+    dev.interior_cells = acc.n;
+    dev.unreachable_cells = acc.unreach;
+    dev.unreachable_fraction = acc.unreach as f64 / acc.n as f64;
+    (dev.max_over_um, dev.max_over_at_mm) = fin(acc.over);
+    (dev.max_under_um, dev.max_under_at_mm) = fin(acc.under);
+    (dev.max_over_reachable_um, dev.max_over_reachable_at_mm) = fin(acc.over_r);
+    (dev.max_above_opening_um, dev.max_above_opening_at_mm) = fin(acc.above_open);
+    dev.rms_reachable_um = if acc.nr > 0 {
+        (acc.ss / acc.nr as f64).sqrt()
+    } else {
+        f64::NAN
+    };
+    dev
+}
+
+impl Deviation {
+    /// A false-colour map of simulated − design (µm) over the assessed cells, unreachable cells and the edge
+    /// band grey; each pixel shows the cell of largest |deviation| in its block, so extremes stay visible, and
+    /// the colours span the 0.1–99.9 percentiles of what is shown (values beyond are clamped).
+    pub fn to_png(&self, title: &str, max_px: usize) -> crate::plot::Canvas {
+        let f = self.nx.max(self.ny).div_ceil(max_px.max(1)).max(1);
+        let (w, h) = ((self.nx / f).max(1), (self.ny / f).max(1));
+        let mut v = vec![f64::NAN; w * h];
+        for (k, out) in v.iter_mut().enumerate() {
+            let (bi, bj) = (k % w, k / w);
+            for j in bj * f..((bj + 1) * f).min(self.ny) {
+                for i in bi * f..((bi + 1) * f).min(self.nx) {
+                    let c = j * self.nx + i;
+                    let d = self.map_um[c] as f64;
+                    if self.unreachable[c] || !d.is_finite() {
+                        continue;
+                    }
+                    if out.is_nan() || d.abs() > out.abs() {
+                        *out = d;
+                    }
+                }
+            }
+        }
+        // colour range: the 0.1 and 99.9 percentiles, so that one extreme cell does not flatten the map
+        let mut fin: Vec<f64> = v.iter().copied().filter(|d| d.is_finite()).collect();
+        if fin.len() > 10 {
+            fin.sort_by(f64::total_cmp);
+            let (lo, hi) = (fin[fin.len() / 1000], fin[fin.len() - 1 - fin.len() / 1000]);
+            v.iter_mut()
+                .filter(|d| d.is_finite())
+                .for_each(|d| *d = d.clamp(lo, hi));
+        }
+        let x0 = self.origin_mm[0];
+        let y0 = self.origin_mm[1];
+        crate::plot::Heatmap {
+            values: &v,
+            nx: w,
+            ny: h,
+            x_range: (x0, x0 + (w * f) as f64 * self.pitch_mm),
+            y_range: (y0, y0 + (h * f) as f64 * self.pitch_mm),
+            title: title.to_string(),
+            x_label: "x (mm)".into(),
+            y_label: "y (mm)".into(),
+            value_label: "sim - design (um)".into(),
+            scale: crate::plot::Scale::Linear,
+            plot_px: 640,
+            rgb: None,
+        }
+        .render()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A V-groove design: the ball reaches the flanks but not the bottom of the V; the unreachable band has
+    /// the width of the ball's contact points on the two flanks.
+    #[test]
+    fn v_groove_bottom_is_unreachable_and_flanks_are_not() {
+        let (pd, n) = (0.01, 400);
+        let slope: f64 = 0.5;
+        let mut design = Heightfield::flat(n, n, pd, true, 0.0);
+        for j in 0..n {
+            for i in 0..n {
+                let x = (i as f64 + 0.5) * pd - 2.0;
+                design.z_mm[j * n + i] = slope * x.abs() - 1.0;
+            }
+        }
+        let tool = ToolShape::Ball { diameter_mm: 1.0 };
+        let win_open = opening(&design.z_mm, n, n, pd, true, &tool);
+        // contact of a ball of radius r on a flank of slope s sits at |x| = r s / sqrt(1 + s²) from the axis
+        let half = 0.5 * slope / (1.0 + slope * slope).sqrt();
+        for i in 0..n {
+            let x = (i as f64 + 0.5) * pd - 2.0;
+            let gap = win_open[200 * n + i] - design.z_mm[200 * n + i];
+            if x.abs() < half - 2.0 * pd {
+                assert!(gap > REACH_TOLERANCE_UM * 1e-3, "x {x}: gap {gap}");
+            } else if x.abs() > half + 2.0 * pd && x.abs() < 1.5 {
+                assert!(gap.abs() < 1e-4, "x {x}: gap {gap}");
+            }
+        }
+    }
+}

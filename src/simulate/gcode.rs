@@ -1,0 +1,806 @@
+//! A G-code reader for the subset of DESIGN.md §5, for programs from anywhere (LinuxCNC, GRBL, CAM
+//! post-processors), not only ours. What it does not understand is refused with the line and column of the
+//! offending character; nothing is skipped silently.
+//!
+//! **Understood.** Comments `( … )` (not nested) and `;` to the end of the line; `N` line numbers; `%` alone on
+//! a line (the second one ends the program); upper or lower case; spaces anywhere outside comments, also
+//! inside numbers (as LinuxCNC reads them). Words:
+//!
+//! | word | meaning |
+//! | --- | --- |
+//! | `G0 G1 G2 G3` | rapid, feed, clockwise / counter-clockwise arc (G17 plane; `I J` or `R` form; `P` full turns) |
+//! | `G4 P` | dwell, seconds |
+//! | `G17` | XY plane (`G18`, `G19` are refused: arcs in other planes are not simulated) |
+//! | `G20 G21` | inch / mm; everything is converted to mm on reading |
+//! | `G90 G91`, `G90.1 G91.1` | absolute / incremental X Y Z, and arc centres (default `G91.1`, relative to the start) |
+//! | `G40 G49 G54 G61 G61.1 G64 [P Q] G80 G94` | states the simulation is already in, or path blending, which the simulation does not model: it follows the programmed path exactly |
+//! | `M0 M1` | pauses (no effect); `M2 M30` end the program (later lines are not read) |
+//! | `M3 M4 M5`, `S` | spindle; `M7 M8 M9` coolant (no effect) |
+//! | `T`, `M6` | a tool change before the first cutting move (the simulation uses one tool; a change after cutting is refused) |
+//! | `F` | feed, units per minute (`G94`) |
+//! | `X Y Z I J R` | coordinates, arc centre offsets, arc radius (negative: the long way round) |
+//!
+//! Anything else — other G and M codes, `A B C U V W` axes, `K` (arcs only in G17), `#` parameters, `[ ]`
+//! expressions, `O` words, block delete `/`, two words of one modal group or two of one letter on a line, a feed
+//! move without a feed rate, an arc whose end radius differs from its start radius — is an error.
+//!
+//! The program's own positions are work coordinates; the tool starts at [`ParseOptions::start_mm`] (LinuxCNC's
+//! standalone interpreter starts at the origin). Arcs are linearised into chords whose sagitta (the largest
+//! distance between a chord and the arc it replaces) is at most `arc_tolerance_mm`: the chords lie inside the
+//! arc, so the swept tool centre is within that tolerance of the programmed one.
+
+use crate::toolpath::moves::{Move, P3};
+use serde::{Deserialize, Serialize};
+
+/// A program that cannot be simulated: where and why. Line and column count from 1 (columns in characters).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("line {line}, column {column}: {message}")]
+pub struct GcodeError {
+    /// Line, from 1.
+    pub line: usize,
+    /// Column in characters, from 1.
+    pub column: usize,
+    /// What is wrong.
+    pub message: String,
+}
+
+/// What a linear segment of the swept path comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SegmentKind {
+    /// `G0`.
+    Rapid,
+    /// `G1`.
+    Feed,
+    /// A chord of a `G2`/`G3` arc.
+    Arc,
+}
+
+/// One straight piece of the tool-tip path, mm, in work coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Segment {
+    /// Start of the tip.
+    pub from: P3,
+    /// End of the tip.
+    pub to: P3,
+    /// Where it comes from.
+    pub kind: SegmentKind,
+    /// The program line, from 1.
+    pub line: u32,
+}
+
+/// Options of the reader.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ParseOptions {
+    /// Largest chord sagitta when arcs are linearised, mm.
+    pub arc_tolerance_mm: f64,
+    /// Tool-tip position before the first move, mm.
+    pub start_mm: P3,
+    /// Refuse a program that expands to more linear segments than this (arcs at a fine tolerance).
+    pub max_segments: usize,
+}
+
+impl Default for ParseOptions {
+    fn default() -> Self {
+        Self {
+            arc_tolerance_mm: 1e-4,
+            start_mm: [0.0; 3],
+            max_segments: 50_000_000,
+        }
+    }
+}
+
+/// A program read into linear segments (mm) and the machine-independent move list of the time estimator.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct Program {
+    /// Every motion as straight segments, in program order (zero-length moves dropped).
+    pub segments: Vec<Segment>,
+    /// The same motion (arcs as their chords) with feeds in mm/min, spindle and dwell commands, for
+    /// [`crate::toolpath::estimate::estimate_s`].
+    pub moves: Vec<Move>,
+    /// Lines read (up to and including the end of the program).
+    pub lines: usize,
+    /// Motion commands that moved (G0/G1/G2/G3 blocks).
+    pub motions: usize,
+    /// Arc commands among them.
+    pub arcs: usize,
+    /// Whether any `G20` (inch) was read.
+    pub inch: bool,
+    /// The line of the `M2`/`M30` or closing `%` that ended the program, if any.
+    pub end_line: Option<usize>,
+    /// The tip's position at the end, mm.
+    pub end_mm: P3,
+}
+
+/// One word: letter, value, 0-based column of the letter.
+#[derive(Clone, Copy, Debug)]
+struct Word {
+    letter: char,
+    value: f64,
+    col: usize,
+}
+
+enum LineKind {
+    Words(Vec<Word>),
+    Percent,
+}
+
+fn tokenize(line: &str, lineno: usize) -> Result<LineKind, GcodeError> {
+    let err = |col: usize, message: String| GcodeError {
+        line: lineno,
+        column: col + 1,
+        message,
+    };
+    let c: Vec<char> = line.chars().collect();
+    if line.trim() == "%" {
+        return Ok(LineKind::Percent);
+    }
+    let mut words = vec![];
+    let mut k = 0;
+    while k < c.len() {
+        match c[k] {
+            ' ' | '\t' | '\r' | '\u{feff}' => k += 1,
+            '(' => {
+                let mut e = k + 1;
+                while e < c.len() && c[e] != ')' {
+                    if c[e] == '(' {
+                        return Err(err(e, "nested comment: `(` inside a comment".into()));
+                    }
+                    e += 1;
+                }
+                if e == c.len() {
+                    return Err(err(k, "comment `(` is not closed on this line".into()));
+                }
+                k = e + 1;
+            }
+            ';' => break,
+            '%' => return Err(err(k, "`%` must stand alone on its line".into())),
+            '/' => return Err(err(k, "block delete `/` is not supported".into())),
+            '#' => return Err(err(k, "parameters (`#`) are not supported".into())),
+            '[' => return Err(err(k, "expressions (`[ ]`) are not supported".into())),
+            'o' | 'O' => {
+                return Err(err(
+                    k,
+                    "O-words (subroutines, loops, conditionals) are not supported".into(),
+                ))
+            }
+            l if l.is_ascii_alphabetic() => {
+                let letter = l.to_ascii_uppercase();
+                let col = k;
+                k += 1;
+                let mut num = String::new();
+                let mut digits = 0;
+                let mut dot = false;
+                while k < c.len() {
+                    match c[k] {
+                        ' ' | '\t' => {}
+                        s @ ('+' | '-') if num.is_empty() => num.push(s),
+                        '.' if !dot => {
+                            dot = true;
+                            num.push('.');
+                        }
+                        d if d.is_ascii_digit() => {
+                            digits += 1;
+                            num.push(d);
+                        }
+                        '#' | '[' if digits == 0 => {
+                            return Err(err(
+                                k,
+                                format!("`{letter}` with a parameter or expression: only plain numbers are supported"),
+                            ))
+                        }
+                        _ => break,
+                    }
+                    k += 1;
+                }
+                if digits == 0 {
+                    return Err(err(col, format!("`{letter}` needs a number")));
+                }
+                let value: f64 = num
+                    .parse()
+                    .map_err(|_| err(col, format!("`{letter}{num}` is not a number")))?;
+                words.push(Word { letter, value, col });
+            }
+            ch => return Err(err(k, format!("unexpected character `{ch}`"))),
+        }
+    }
+    Ok(LineKind::Words(words))
+}
+
+/// A G or M code in tenths (`G91.1` → 911), or None when it is not a multiple of 0.1.
+fn tenths(v: f64) -> Option<i64> {
+    let t = (v * 10.0).round();
+    ((v * 10.0 - t).abs() < 1e-6 && v >= 0.0).then_some(t as i64)
+}
+
+fn gname(t: i64) -> String {
+    if t % 10 == 0 {
+        format!("G{}", t / 10)
+    } else {
+        format!("G{}.{}", t / 10, t % 10)
+    }
+}
+
+/// Modal group of a supported G code (tenths), or the reason it is refused.
+fn g_group(t: i64) -> Result<u8, String> {
+    Ok(match t {
+        0 | 10 | 20 | 30 | 800 => 1,
+        40 => 0,
+        170 => 2,
+        200 | 210 => 6,
+        900 | 910 => 3,
+        901 | 911 => 4,
+        940 => 5,
+        400 => 7,
+        490 => 8,
+        540 => 12,
+        610 | 611 | 640 => 13,
+        180 | 190 => return Err("only the XY plane (G17) is supported".into()),
+        280 | 281 | 300 | 301 => return Err("home positions (G28/G30) are machine-specific and not simulated".into()),
+        410 | 411 | 420 | 421 => return Err("cutter radius compensation is not supported".into()),
+        430..=432 => return Err("tool length offsets are not supported".into()),
+        530 => return Err("machine coordinates (G53) are not supported".into()),
+        550..=593 => return Err("only the G54 work coordinate system is supported".into()),
+        730 | 760 | 810..=890 => return Err("canned cycles are not supported".into()),
+        920..=923 => return Err("coordinate offsets (G92) are not supported".into()),
+        930 | 950 => return Err("only units-per-minute feed (G94) is supported".into()),
+        _ => {
+            return Err(format!(
+                "{} is not supported (understood: G0 G1 G2 G3 G4 G17 G20 G21 G40 G49 G54 G61 G61.1 G64 G80 G90 G90.1 \
+                 G91 G91.1 G94)",
+                gname(t)
+            ))
+        }
+    })
+}
+
+/// Modal group of a supported M code.
+fn m_group(m: i64) -> Result<u8, String> {
+    Ok(match m {
+        0 | 1 | 2 | 30 => 4,
+        6 => 6,
+        3..=5 => 7,
+        7..=9 => 8,
+        _ => {
+            return Err(format!(
+                "M{m} is not supported (understood: M0 M1 M2 M3 M4 M5 M6 M7 M8 M9 M30)"
+            ))
+        }
+    })
+}
+
+/// The reader's state between lines.
+struct State {
+    pos: P3,
+    inch: bool,
+    incremental: bool,
+    arc_absolute: bool,
+    motion: Option<i64>,
+    feed_mm_min: f64,
+    spindle_rpm: f64,
+    cut_yet: bool,
+    tool_changed: bool,
+}
+
+/// Read a whole program.
+pub fn parse(text: &str, opt: &ParseOptions) -> Result<Program, GcodeError> {
+    let mut st = State {
+        pos: opt.start_mm,
+        inch: false,
+        incremental: false,
+        arc_absolute: false,
+        motion: None,
+        feed_mm_min: 0.0,
+        spindle_rpm: 0.0,
+        cut_yet: false,
+        tool_changed: false,
+    };
+    let mut prog = Program::default();
+    let mut percents = 0;
+    let mut seen_content = false;
+    for (n, raw) in text.lines().enumerate() {
+        let lineno = n + 1;
+        prog.lines = lineno;
+        match tokenize(raw, lineno)? {
+            LineKind::Percent => {
+                percents += 1;
+                if percents == 2 || seen_content {
+                    prog.end_line = Some(lineno);
+                    break;
+                }
+            }
+            LineKind::Words(w) => {
+                if w.is_empty() {
+                    continue;
+                }
+                seen_content = true;
+                if block(&w, lineno, &mut st, &mut prog, opt)? {
+                    prog.end_line = Some(lineno);
+                    break;
+                }
+            }
+        }
+    }
+    if prog.segments.len() > opt.max_segments {
+        return Err(GcodeError {
+            line: prog.lines,
+            column: 1,
+            message: format!("more than {} linear segments", opt.max_segments),
+        });
+    }
+    prog.end_mm = st.pos;
+    Ok(prog)
+}
+
+/// Execute one block in the order of RS274/NGC (F, S, T, M6, spindle, coolant, dwell, modes, motion, stop).
+/// Returns true when the block ends the program.
+fn block(
+    w: &[Word],
+    lineno: usize,
+    st: &mut State,
+    prog: &mut Program,
+    opt: &ParseOptions,
+) -> Result<bool, GcodeError> {
+    let err = |col: usize, message: String| GcodeError {
+        line: lineno,
+        column: col + 1,
+        message,
+    };
+    let mut gs: Vec<(i64, usize)> = vec![];
+    let mut ms: Vec<(i64, usize)> = vec![];
+    let mut val: [Option<(f64, usize)>; 26] = [None; 26];
+    let mut g_groups: Vec<u8> = vec![];
+    let mut m_groups: Vec<u8> = vec![];
+    for (k, wd) in w.iter().enumerate() {
+        match wd.letter {
+            'G' => {
+                let t = tenths(wd.value).ok_or_else(|| err(wd.col, format!("G{} is not supported", wd.value)))?;
+                let g = g_group(t).map_err(|m| err(wd.col, m))?;
+                if g != 0 && g_groups.contains(&g) {
+                    return Err(err(
+                        wd.col,
+                        format!("{} conflicts with another G code of its group on this line", gname(t)),
+                    ));
+                }
+                g_groups.push(g);
+                gs.push((t, wd.col));
+            }
+            'M' => {
+                let m = match tenths(wd.value) {
+                    Some(t) if t % 10 == 0 => t / 10,
+                    _ => return Err(err(wd.col, format!("M{} is not supported", wd.value))),
+                };
+                let g = m_group(m).map_err(|e| err(wd.col, e))?;
+                if g != 8 && m_groups.contains(&g) {
+                    return Err(err(
+                        wd.col,
+                        format!("M{m} conflicts with another M code of its group on this line"),
+                    ));
+                }
+                m_groups.push(g);
+                ms.push((m, wd.col));
+            }
+            'N' => {
+                if k != 0 {
+                    return Err(err(wd.col, "a line number `N` must come first on the line".into()));
+                }
+            }
+            'X' | 'Y' | 'Z' | 'I' | 'J' | 'R' | 'F' | 'S' | 'P' | 'Q' | 'T' => {
+                let slot = &mut val[(wd.letter as u8 - b'A') as usize];
+                if slot.is_some() {
+                    return Err(err(wd.col, format!("`{}` appears twice on this line", wd.letter)));
+                }
+                *slot = Some((wd.value, wd.col));
+            }
+            'K' => return Err(err(wd.col, "`K` is not used by G17 arcs (XY plane only)".into())),
+            'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
+                return Err(err(
+                    wd.col,
+                    format!("axis `{}`: only X, Y and Z are simulated (3-axis)", wd.letter),
+                ))
+            }
+            l => return Err(err(wd.col, format!("word `{l}` is not supported"))),
+        }
+    }
+    let get = |l: char| val[(l as u8 - b'A') as usize];
+    let has_g = |t: i64| gs.iter().any(|g| g.0 == t);
+    let has_m = |m: i64| ms.iter().any(|g| g.0 == m);
+    let unit = |inch: bool| if inch { 25.4 } else { 1.0 };
+
+    // F, S, T
+    if let Some((f, col)) = get('F') {
+        if f < 0.0 {
+            return Err(err(col, format!("negative feed F{f}")));
+        }
+        // units are those in force when F is read; a G20/G21 on the same line applies first
+        let inch = if has_g(200) {
+            true
+        } else if has_g(210) {
+            false
+        } else {
+            st.inch
+        };
+        st.feed_mm_min = f * unit(inch);
+    }
+    if let Some((s, col)) = get('S') {
+        if s < 0.0 {
+            return Err(err(col, format!("negative spindle speed S{s}")));
+        }
+        st.spindle_rpm = s;
+    }
+    // M6: one tool for the whole simulation
+    if let Some(&(_, col)) = ms.iter().find(|m| m.0 == 6) {
+        if st.cut_yet || st.tool_changed {
+            return Err(err(
+                col,
+                "a tool change after cutting (or a second one): the simulation uses one tool for the whole program"
+                    .into(),
+            ));
+        }
+        st.tool_changed = true;
+    }
+    if has_m(3) || has_m(4) {
+        prog.moves.push(Move::SpindleOn(st.spindle_rpm));
+    }
+    if has_m(5) {
+        prog.moves.push(Move::SpindleOff);
+    }
+    // P and Q belong to G4, G64 or an arc
+    let arc_here = matches!(
+        gs.iter()
+            .find(|g| matches!(g.0, 0 | 10 | 20 | 30 | 800))
+            .map(|g| g.0)
+            .or(st.motion),
+        Some(20 | 30)
+    );
+    if let Some((_, col)) = get('P') {
+        if !(has_g(40) || has_g(640) || arc_here) {
+            return Err(err(
+                col,
+                "`P` is only understood with G4 (dwell), G64 or an arc (turns)".into(),
+            ));
+        }
+    }
+    if let Some((_, col)) = get('Q') {
+        if !has_g(640) {
+            return Err(err(col, "`Q` is only understood with G64".into()));
+        }
+    }
+    if has_g(40) {
+        let (p, col) = get('P').ok_or_else(|| {
+            err(
+                gs.iter().find(|g| g.0 == 40).map_or(0, |g| g.1),
+                "G4 needs `P` (seconds)".into(),
+            )
+        })?;
+        if p < 0.0 {
+            return Err(err(col, format!("negative dwell P{p}")));
+        }
+        prog.moves.push(Move::Dwell(p));
+    }
+    // modes
+    if has_g(200) {
+        st.inch = true;
+        prog.inch = true;
+    }
+    if has_g(210) {
+        st.inch = false;
+    }
+    if has_g(900) {
+        st.incremental = false;
+    }
+    if has_g(910) {
+        st.incremental = true;
+    }
+    if has_g(901) {
+        st.arc_absolute = true;
+    }
+    if has_g(911) {
+        st.arc_absolute = false;
+    }
+    let mut motion_col = None;
+    for &(t, col) in &gs {
+        if matches!(t, 0 | 10 | 20 | 30) {
+            st.motion = Some(t);
+            motion_col = Some(col);
+        } else if t == 800 {
+            st.motion = None;
+            motion_col = Some(col);
+        }
+    }
+    // motion
+    let axis_col = ['X', 'Y', 'Z'].iter().filter_map(|l| get(*l).map(|v| v.1)).min();
+    let arc_col = ['I', 'J', 'R'].iter().filter_map(|l| get(*l).map(|v| v.1)).min();
+    if axis_col.is_some() || arc_col.is_some() {
+        let col = motion_col.or(axis_col).or(arc_col).unwrap_or(0);
+        let Some(motion) = st.motion else {
+            return Err(err(
+                axis_col.or(arc_col).unwrap_or(0),
+                "coordinates without an active motion mode (G0/G1/G2/G3)".into(),
+            ));
+        };
+        if !matches!(motion, 20 | 30) {
+            if let Some(c) = arc_col {
+                return Err(err(c, "`I`, `J` or `R` without an arc (G2/G3)".into()));
+            }
+        }
+        let u = unit(st.inch);
+        let mut target = st.pos;
+        for (k, l) in ['X', 'Y', 'Z'].iter().enumerate() {
+            if let Some((v, _)) = get(*l) {
+                target[k] = if st.incremental { st.pos[k] + v * u } else { v * u };
+            }
+        }
+        if motion != 0 && st.feed_mm_min <= 0.0 {
+            return Err(err(col, format!("{} without a feed rate (F)", gname(motion))));
+        }
+        let from = st.pos;
+        let before = prog.segments.len();
+        match motion {
+            0 => push_line(prog, from, target, SegmentKind::Rapid, lineno, None),
+            10 => push_line(prog, from, target, SegmentKind::Feed, lineno, Some(st.feed_mm_min)),
+            _ => {
+                arc(prog, st, &get, target, motion == 20, lineno, col, opt).map_err(|m| err(m.0, m.1))?;
+                prog.arcs += 1;
+            }
+        }
+        if prog.segments.len() > before {
+            prog.motions += 1;
+            if motion != 0 {
+                st.cut_yet = true;
+            }
+        }
+        if prog.segments.len() > opt.max_segments {
+            return Err(err(
+                col,
+                format!(
+                    "the program expands to more than {} linear segments (arcs are split within the arc tolerance)",
+                    opt.max_segments
+                ),
+            ));
+        }
+        st.pos = target;
+    }
+    Ok(has_m(2) || has_m(30))
+}
+
+fn push_line(prog: &mut Program, from: P3, to: P3, kind: SegmentKind, line: usize, feed: Option<f64>) {
+    if from == to {
+        return;
+    }
+    prog.segments.push(Segment {
+        from,
+        to,
+        kind,
+        line: line as u32,
+    });
+    prog.moves.push(match feed {
+        None => Move::Rapid(to),
+        Some(f) => Move::Feed(to, f),
+    });
+}
+
+/// Linearise a G2 (`cw`) / G3 arc in the XY plane from the current position to `target` into chords of
+/// sagitta ≤ the tolerance. The radius varies linearly from start to end (LinuxCNC accepts a small
+/// difference); z varies linearly with the angle (a helix). Errors carry (0-based column, message).
+#[allow(clippy::too_many_arguments)]
+fn arc(
+    prog: &mut Program,
+    st: &State,
+    get: &dyn Fn(char) -> Option<(f64, usize)>,
+    target: P3,
+    cw: bool,
+    lineno: usize,
+    col: usize,
+    opt: &ParseOptions,
+) -> Result<(), (usize, String)> {
+    use std::f64::consts::TAU;
+    let u = if st.inch { 25.4 } else { 1.0 };
+    let [x0, y0, z0] = st.pos;
+    let [x1, y1, z1] = target;
+    let turns = match get('P') {
+        None => 0,
+        Some((p, c)) => {
+            if p < 1.0 || p.fract() != 0.0 || p > 1e6 {
+                return Err((c, format!("arc turns P{p} must be a positive whole number")));
+            }
+            p as i64 - 1
+        }
+    };
+    let (cx, cy, full) = match (get('R'), get('I').or(get('J'))) {
+        (Some((_, c)), Some(_)) => return Err((c, "an arc takes `R` or `I`/`J`, not both".into())),
+        (None, None) => return Err((col, "G2/G3 needs `I`/`J` (centre) or `R` (radius)".into())),
+        (Some((r, c)), None) => {
+            if get('X').is_none() && get('Y').is_none() {
+                return Err((c, "an `R` arc needs X or Y (a full circle needs I/J)".into()));
+            }
+            let d = ((x1 - x0).powi(2) + (y1 - y0).powi(2)).sqrt();
+            let rad = r.abs() * u;
+            if d < 1e-9 {
+                return Err((c, "an `R` arc whose end is its start (a full circle needs I/J)".into()));
+            }
+            if rad < d / 2.0 - 1e-6_f64.max(1e-6 * d) {
+                return Err((
+                    c,
+                    format!("radius {} mm is less than half the chord, {:.6} mm", rad, d / 2.0),
+                ));
+            }
+            let h = (rad * rad - d * d / 4.0).max(0.0).sqrt();
+            let (mx, my) = ((x0 + x1) / 2.0, (y0 + y1) / 2.0);
+            let (nx, ny) = (-(y1 - y0) / d, (x1 - x0) / d); // left of the chord
+                                                            // G3 (ccw) with R > 0 turns left around a centre on the left; the long way (R < 0) flips it
+            let s = if cw == (r > 0.0) { -1.0 } else { 1.0 };
+            (mx + s * h * nx, my + s * h * ny, false)
+        }
+        (None, Some(_)) => {
+            let i = get('I').map_or(0.0, |v| v.0) * u;
+            let j = get('J').map_or(0.0, |v| v.0) * u;
+            let (cx, cy) = if st.arc_absolute { (i, j) } else { (x0 + i, y0 + j) };
+            let r0 = ((x0 - cx).powi(2) + (y0 - cy).powi(2)).sqrt();
+            let r1 = ((x1 - cx).powi(2) + (y1 - cy).powi(2)).sqrt();
+            if r0 < 1e-9 {
+                return Err((col, "arc of zero radius (the centre is the start point)".into()));
+            }
+            if (r1 - r0).abs() > 0.002_f64.max(1e-3 * r0) {
+                return Err((
+                    col,
+                    format!(
+                        "radius to the end ({r1:.6} mm) differs from radius to the start ({r0:.6} mm) by more than \
+                         max(0.002 mm, 0.1%)"
+                    ),
+                ));
+            }
+            let full = (x1 - x0).abs() < 1e-9 && (y1 - y0).abs() < 1e-9;
+            (cx, cy, full)
+        }
+    };
+    let r0 = ((x0 - cx).powi(2) + (y0 - cy).powi(2)).sqrt();
+    let r1 = ((x1 - cx).powi(2) + (y1 - cy).powi(2)).sqrt();
+    let a0 = (y0 - cy).atan2(x0 - cx);
+    let a1 = (y1 - cy).atan2(x1 - cx);
+    let mut sweep = if cw { a0 - a1 } else { a1 - a0 };
+    sweep = sweep.rem_euclid(TAU);
+    if full || sweep < 1e-12 {
+        sweep = TAU;
+    }
+    sweep += TAU * turns as f64;
+    let rmax = r0.max(r1);
+    let tol = opt.arc_tolerance_mm;
+    let dmax = if tol >= rmax {
+        std::f64::consts::FRAC_PI_2
+    } else {
+        (2.0 * (1.0 - tol / rmax).acos()).min(std::f64::consts::FRAC_PI_2)
+    };
+    let n = (sweep / dmax).ceil().max(1.0);
+    if n > opt.max_segments as f64 {
+        return Err((col, format!("the arc needs {n} chords, more than the segment limit")));
+    }
+    let n = n as usize;
+    let dir = if cw { -1.0 } else { 1.0 };
+    let mut at = st.pos;
+    for k in 1..=n {
+        let p = if k == n {
+            target
+        } else {
+            let f = k as f64 / n as f64;
+            let a = a0 + dir * sweep * f;
+            let rr = r0 + (r1 - r0) * f;
+            [cx + rr * a.cos(), cy + rr * a.sin(), z0 + (z1 - z0) * f]
+        };
+        push_line(prog, at, p, SegmentKind::Arc, lineno, Some(st.feed_mm_min));
+        at = p;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn p(text: &str) -> Result<Program, GcodeError> {
+        parse(text, &ParseOptions::default())
+    }
+
+    #[test]
+    fn words_comments_case_and_spaces() {
+        let g = p("%\n(header)\nN10 g21g90 ; note\nG0X1 Y 2 . 5 z-0.5\nn20 G1 X 2 F100 (cut)\n%\nG0 X99\n").unwrap();
+        assert_eq!(g.segments.len(), 2);
+        assert_eq!(g.segments[0].to, [1.0, 2.5, -0.5]);
+        assert_eq!(g.segments[1].to, [2.0, 2.5, -0.5]);
+        assert_eq!(g.segments[1].line, 5);
+        assert_eq!(g.end_line, Some(6), "the second % ends the program");
+    }
+
+    #[test]
+    fn inch_and_incremental() {
+        let g = p("G20 G91\nG1 X1 Y-1 F10\nX1\nG21 G90 G0 Z1\n").unwrap();
+        let s = &g.segments;
+        assert!((s[0].to[0] - 25.4).abs() < 1e-12 && (s[0].to[1] + 25.4).abs() < 1e-12);
+        assert!((s[1].to[0] - 50.8).abs() < 1e-12);
+        assert_eq!(s[2].to, [50.8, -25.4, 1.0]);
+        assert!(matches!(g.moves[0], Move::Feed(_, f) if (f - 254.0).abs() < 1e-12));
+        assert!(g.inch);
+    }
+
+    #[test]
+    fn refusals_carry_line_and_column() {
+        for (text, line, col, what) in [
+            ("G0 X1\nG1 X2\n", 2, 1, "feed"),
+            ("G0 X1\n  G18\n", 2, 3, "XY plane"),
+            ("G0 X1 A3\n", 1, 7, "axis"),
+            ("#1 = 2\n", 1, 1, "parameters"),
+            ("G1 X[1+2] F1\n", 1, 5, "parameter or expression"),
+            ("O100 sub\n", 1, 1, "O-words"),
+            ("G0 X1 (open\n", 1, 7, "not closed"),
+            ("G0 G1 X1\n", 1, 4, "conflicts"),
+            ("G0 X1 X2\n", 1, 7, "twice"),
+            ("G81 X1 Z-1 R1\n", 1, 1, "canned"),
+            ("M98\n", 1, 1, "M98"),
+            ("G2 X1 Y1 F10\n", 1, 1, "I`/`J"),
+            ("G1 X1 F10\nG2 X4 Y0 I1 J0\n", 2, 1, "differs"),
+            ("G0 X1 Y2 $\n", 1, 10, "unexpected"),
+            ("G1 X1 F10\nG1 X2 M6\n", 2, 7, "tool change"),
+            ("G80 X1\n", 1, 5, "motion mode"),
+            ("G0 X1 K1\n", 1, 7, "K"),
+            ("G1 X\n", 1, 4, "needs a number"),
+        ] {
+            let e = p(text).expect_err(text);
+            assert_eq!((e.line, e.column), (line, col), "{text:?}: {e}");
+            assert!(e.message.contains(what), "{text:?}: {e}");
+        }
+    }
+
+    #[test]
+    fn arcs_ij_and_r_forms_agree() {
+        let opt = ParseOptions {
+            arc_tolerance_mm: 1e-4,
+            ..Default::default()
+        };
+        // quarter circle ccw from (1,0) to (0,1) about the origin, three ways
+        let texts = [
+            "G0 X1 Y0\nG3 X0 Y1 I-1 J0 F100\n",
+            "G0 X1 Y0\nG3 X0 Y1 R1 F100\n",
+            "G0 X1 Y0\nG90.1 G3 X0 Y1 I0 J0 F100\n",
+        ];
+        for t in texts {
+            let g = parse(t, &opt).unwrap();
+            for s in &g.segments[1..] {
+                let r = (s.to[0].powi(2) + s.to[1].powi(2)).sqrt();
+                assert!((r - 1.0).abs() < 1e-12, "{t}: on the circle");
+                assert!(s.to[0] >= -1e-12 && s.to[1] >= -1e-12, "{t}: first quadrant");
+                let m = [(s.from[0] + s.to[0]) / 2.0, (s.from[1] + s.to[1]) / 2.0];
+                let sag = 1.0 - (m[0] * m[0] + m[1] * m[1]).sqrt();
+                assert!(sag <= 1e-4 + 1e-12, "{t}: sagitta {sag}");
+            }
+            assert_eq!(g.segments.last().unwrap().to, [0.0, 1.0, 0.0]);
+        }
+        // R < 0: the long way round (270°), cw full circle with P2 = two turns
+        let g = parse("G0 X1 Y0\nG3 X0 Y1 R-1 F100\n", &opt).unwrap();
+        assert!(
+            g.segments[1..].iter().any(|s| s.to[0] > 1.99 && s.to[1] > 0.99),
+            "the long arc about (1, 1) passes (2, 1)"
+        );
+        let one = parse("G0 X1 Y0\nG2 I-1 F100\n", &opt).unwrap().segments.len();
+        let two = parse("G0 X1 Y0\nG2 I-1 P2 F100\n", &opt).unwrap().segments.len();
+        assert!(two >= 2 * (one - 1) - 1, "{one} {two}");
+    }
+
+    #[test]
+    fn helix_descends_linearly() {
+        let g = p("G0 X1 Y0 Z0\nG2 I-1 Z-1 F100\n").unwrap();
+        let last = g.segments.last().unwrap();
+        assert_eq!(last.to, [1.0, 0.0, -1.0]);
+        for s in &g.segments[1..] {
+            let a = (-s.to[1]).atan2(s.to[0]).rem_euclid(std::f64::consts::TAU);
+            let a = if a < 1e-9 { std::f64::consts::TAU } else { a };
+            assert!((s.to[2] + a / std::f64::consts::TAU).abs() < 1e-9, "{s:?}");
+        }
+    }
+
+    #[test]
+    fn program_end_stops_reading() {
+        let g = p("G0 X1\nM2\nthis is not g-code\n").unwrap();
+        assert_eq!(g.end_line, Some(2));
+        assert_eq!(g.segments.len(), 1);
+    }
+}
