@@ -35,3 +35,4 @@ pub mod slope;
 pub mod stream;
 pub mod toolpath;
 pub mod verify;
+pub mod x3p;

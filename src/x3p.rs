@@ -1,0 +1,572 @@
+//! X3P surface files (ISO 25178-72, the XML container of ISO 5436-2): read measured areal topography and
+//! write simulated surfaces so that metrology software opens them.
+//!
+//! An X3P file is a zip archive holding `main.xml` (the record structure: Record1 axes, Record2 provenance,
+//! Record3 matrix size and a link to the binary data, Record4 the checksum file), the binary point data
+//! (`bindata/data.bin`, little-endian, x fastest then y) and `md5checksum.hex` (the MD5 of `main.xml`).
+//!
+//! Reading copes with what real files do: `main.xml` in a subfolder of the zip (every link is then resolved
+//! relative to that folder), macOS resource-fork entries (`__MACOSX/`, `._*`) ignored, invalid points given
+//! as NaN in floating-point data or by a `ValidPointsLink` bit array (1 = valid, least significant bit
+//! first), inline `DataList` data with empty `Datum` for invalid points, and data types D (f64), F (f32),
+//! L (i32) and I (i16). Axes are in metres in the file; brdfmill's heightfields are in mm.
+//!
+//! Heights: for the Z axis the stored value `v` gives `z = Offset + Increment · v` in metres. The writer
+//! stores heights **in mm** with `CZ/Increment = 1.0E-3` so that a project file reads back bit-identical
+//! (the reader forms the scale `Increment · 1000` first, which is exactly 1 for `1.0E-3`, then multiplies);
+//! storing metres would need a division by 1000 that cannot be inverted exactly for about 1% of doubles.
+//!
+//! Invalid points: [`X3p::valid`] marks them; [`X3p::heightfield`] fills them by iterated averaging of
+//! their valid neighbours (an inpainting that keeps the surface smooth and continuous, used for wave optics)
+//! and [`X3p::masked_slopes`] gives central-difference slopes only where all four neighbours are valid.
+
+use crate::heightfield::Heightfield;
+use md5::{Digest, Md5};
+use std::io::{Read, Write};
+use std::path::{Path, PathBuf};
+
+/// An X3P file could not be read or written.
+#[derive(Debug, thiserror::Error)]
+pub enum X3pError {
+    /// The file could not be opened or read.
+    #[error("cannot read {path}")]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// The cause.
+        #[source]
+        source: std::io::Error,
+    },
+    /// The zip container is unreadable.
+    #[error("{path} is not a readable zip archive: {message}")]
+    Zip {
+        /// The file.
+        path: PathBuf,
+        /// What the zip reader said.
+        message: String,
+    },
+    /// A required entry is missing from the archive.
+    #[error("{path}: the archive has no {entry}")]
+    MissingEntry {
+        /// The file.
+        path: PathBuf,
+        /// The missing entry.
+        entry: String,
+    },
+    /// `main.xml` is not well-formed XML.
+    #[error("{path}: main.xml is not well-formed XML: {message}")]
+    Xml {
+        /// The file.
+        path: PathBuf,
+        /// What the XML parser said.
+        message: String,
+    },
+    /// A field of `main.xml` is missing or has an unusable value.
+    #[error("{path}: main.xml field {field}: {message}")]
+    Field {
+        /// The file.
+        path: PathBuf,
+        /// The field's path in the record structure, e.g. `Record3/MatrixDimension/SizeX`.
+        field: String,
+        /// What is wrong with it.
+        message: String,
+    },
+    /// The binary data does not match the declared size or checksum.
+    #[error("{path}: {entry}: {message}")]
+    Data {
+        /// The file.
+        path: PathBuf,
+        /// The archive entry.
+        entry: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The heightfield to write is invalid.
+    #[error("cannot write {path}: {message}")]
+    Invalid {
+        /// The destination.
+        path: PathBuf,
+        /// Why.
+        message: String,
+    },
+    /// The output could not be written.
+    #[error(transparent)]
+    Write(#[from] crate::io::WriteError),
+}
+
+/// A surface read from an X3P file.
+#[derive(Clone, Debug)]
+pub struct X3p {
+    /// Points along x (`Record3/MatrixDimension/SizeX`).
+    pub nx: usize,
+    /// Points along y.
+    pub ny: usize,
+    /// Point spacing in x, mm (`CX/Increment` × 1000).
+    pub pitch_x_mm: f64,
+    /// Point spacing in y, mm.
+    pub pitch_y_mm: f64,
+    /// Heights in mm, row-major (x fastest); NaN where the point is invalid.
+    pub z_mm: Vec<f64>,
+    /// `true` where the point is valid.
+    pub valid: Vec<bool>,
+    /// The data type letter of the Z axis (`D`, `F`, `L`, `I`).
+    pub data_type: char,
+    /// Where `main.xml` sits in the archive.
+    pub main_xml: String,
+    /// `Record2/Creator`, when present.
+    pub creator: Option<String>,
+    /// `Record2/Instrument` manufacturer and model, when present.
+    pub instrument: Option<String>,
+    /// Whether the point data's MD5 matched `MD5ChecksumPointData` (`None`: no checksum given).
+    pub data_checksum_ok: Option<bool>,
+}
+
+impl X3p {
+    /// Number of invalid points.
+    pub fn invalid_count(&self) -> usize {
+        self.valid.iter().filter(|v| !**v).count()
+    }
+
+    /// The surface as a heightfield (mm, not periodic), invalid points filled by iterated averaging of
+    /// their valid (or already filled) 8-neighbours, innermost first. Errors when no point is valid or the
+    /// spacing differs between x and y (brdfmill's heightfields have one pitch).
+    pub fn heightfield(&self) -> Result<Heightfield, String> {
+        if !self.valid.iter().any(|v| *v) {
+            return Err("the surface has no valid point".into());
+        }
+        if (self.pitch_x_mm - self.pitch_y_mm).abs() > 1e-9 * self.pitch_x_mm {
+            return Err(format!(
+                "x and y spacing differ ({} and {} mm)",
+                self.pitch_x_mm, self.pitch_y_mm
+            ));
+        }
+        let (nx, ny) = (self.nx, self.ny);
+        let mut z = self.z_mm.clone();
+        let mut known = self.valid.clone();
+        let mut todo: Vec<usize> = (0..nx * ny).filter(|k| !known[*k]).collect();
+        while !todo.is_empty() {
+            let mut fills = Vec::new();
+            for &k in &todo {
+                let (i, j) = ((k % nx) as isize, (k / nx) as isize);
+                let (mut s, mut n) = (0.0, 0);
+                for dj in -1..=1 {
+                    for di in -1..=1 {
+                        let (a, b) = (i + di, j + dj);
+                        if (di, dj) != (0, 0) && a >= 0 && b >= 0 && a < nx as isize && b < ny as isize {
+                            let q = b as usize * nx + a as usize;
+                            if known[q] {
+                                s += z[q];
+                                n += 1;
+                            }
+                        }
+                    }
+                }
+                if n > 0 {
+                    fills.push((k, s / n as f64));
+                }
+            }
+            for (k, v) in &fills {
+                z[*k] = *v;
+                known[*k] = true;
+            }
+            todo.retain(|k| !known[*k]);
+        }
+        Ok(Heightfield {
+            nx,
+            ny,
+            pitch_mm: self.pitch_x_mm,
+            periodic: false,
+            z_mm: z,
+        })
+    }
+
+    /// Central-difference slopes `(∂z/∂x, ∂z/∂y)` at every point whose four neighbours and itself are valid
+    /// (pairs touching an invalid point are skipped); a border of `margin` (at least 1) points is left out.
+    pub fn masked_slopes(&self, margin: usize) -> Vec<(f64, f64)> {
+        let (nx, ny) = (self.nx, self.ny);
+        let m = margin.max(1);
+        let mut out = Vec::new();
+        if nx <= 2 * m || ny <= 2 * m {
+            return out;
+        }
+        for j in m..ny - m {
+            for i in m..nx - m {
+                let k = j * nx + i;
+                if [k, k - 1, k + 1, k - nx, k + nx].iter().all(|q| self.valid[*q]) {
+                    out.push((
+                        (self.z_mm[k + 1] - self.z_mm[k - 1]) / (2.0 * self.pitch_x_mm),
+                        (self.z_mm[k + nx] - self.z_mm[k - nx]) / (2.0 * self.pitch_y_mm),
+                    ));
+                }
+            }
+        }
+        out
+    }
+}
+
+fn is_junk(name: &str) -> bool {
+    name.starts_with("__MACOSX/") || name.rsplit('/').next().is_some_and(|f| f.starts_with("._"))
+}
+
+fn hex(d: &[u8]) -> String {
+    d.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Read an X3P file (see the module notes for what is supported).
+pub fn read(path: &Path) -> Result<X3p, X3pError> {
+    let io = |source| X3pError::Io {
+        path: path.to_path_buf(),
+        source,
+    };
+    let zerr = |e: zip::result::ZipError| X3pError::Zip {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    };
+    let file = std::fs::File::open(path).map_err(io)?;
+    let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(zerr)?;
+    let names: Vec<String> = zip.file_names().map(str::to_string).collect();
+    let main_xml = names
+        .iter()
+        .filter(|n| !is_junk(n) && (*n == "main.xml" || n.ends_with("/main.xml")))
+        .min_by_key(|n| n.len())
+        .cloned()
+        .ok_or_else(|| X3pError::MissingEntry {
+            path: path.to_path_buf(),
+            entry: "main.xml".into(),
+        })?;
+    let base = &main_xml[..main_xml.len() - "main.xml".len()];
+    let mut read_entry = |name: &str| -> Result<Vec<u8>, X3pError> {
+        let mut f = zip.by_name(name).map_err(|_| X3pError::MissingEntry {
+            path: path.to_path_buf(),
+            entry: name.to_string(),
+        })?;
+        let mut v = Vec::with_capacity(f.size() as usize);
+        f.read_to_end(&mut v).map_err(io)?;
+        Ok(v)
+    };
+    let xml_bytes = read_entry(&main_xml)?;
+    let xml = String::from_utf8_lossy(&xml_bytes);
+    let xml = xml.trim_start_matches('\u{feff}');
+    let doc = roxmltree::Document::parse(xml).map_err(|e| X3pError::Xml {
+        path: path.to_path_buf(),
+        message: e.to_string(),
+    })?;
+    let field_err = |field: &str, message: String| X3pError::Field {
+        path: path.to_path_buf(),
+        field: field.to_string(),
+        message,
+    };
+    let find = |route: &str| -> Option<roxmltree::Node<'_, '_>> {
+        let mut node = doc.root_element();
+        for part in route.split('/') {
+            node = node
+                .children()
+                .find(|c| c.is_element() && c.tag_name().name() == part)?;
+        }
+        Some(node)
+    };
+    let text = |route: &str| find(route).and_then(|n| n.text()).map(|t| t.trim().to_string());
+    let num = |route: &str| -> Result<f64, X3pError> {
+        let t = text(route).ok_or_else(|| field_err(route, "missing".into()))?;
+        t.parse::<f64>()
+            .map_err(|_| field_err(route, format!("`{t}` is not a number")))
+    };
+    let size = |route: &str| -> Result<usize, X3pError> {
+        let t = text(route).ok_or_else(|| field_err(route, "missing".into()))?;
+        t.parse::<usize>()
+            .map_err(|_| field_err(route, format!("`{t}` is not a count")))
+    };
+    let nx = size("Record3/MatrixDimension/SizeX")?;
+    let ny = size("Record3/MatrixDimension/SizeY")?;
+    let nz = size("Record3/MatrixDimension/SizeZ")?;
+    if nx == 0 || ny == 0 || nz != 1 || nx.checked_mul(ny).is_none_or(|n| n > 1 << 30) {
+        return Err(field_err(
+            "Record3/MatrixDimension",
+            format!("unsupported size {nx}×{ny}×{nz} (an areal surface has SizeZ 1)"),
+        ));
+    }
+    let mut pitch = [0.0; 2];
+    for (p, ax) in pitch.iter_mut().zip(["CX", "CY"]) {
+        let route = format!("Record1/Axes/{ax}/Increment");
+        let v = num(&route)?;
+        if !(v.is_finite() && v > 0.0) {
+            return Err(field_err(&route, format!("spacing must be positive, got {v}")));
+        }
+        *p = v * 1000.0;
+    }
+    let data_type = text("Record1/Axes/CZ/DataType")
+        .and_then(|t| t.chars().next())
+        .ok_or_else(|| field_err("Record1/Axes/CZ/DataType", "missing".into()))?;
+    let inc = match text("Record1/Axes/CZ/Increment").filter(|t| !t.is_empty()) {
+        Some(_) => num("Record1/Axes/CZ/Increment")?,
+        None => 1.0,
+    };
+    let offset = match text("Record1/Axes/CZ/Offset").filter(|t| !t.is_empty()) {
+        Some(_) => num("Record1/Axes/CZ/Offset")?,
+        None => 0.0,
+    };
+    let (scale, offset_mm) = (inc * 1000.0, offset * 1000.0);
+    let n = nx * ny;
+    let mut z = vec![f64::NAN; n];
+    let mut checksum_ok = None;
+    if let Some(link) = text("Record3/DataLink/PointDataLink") {
+        let entry = format!("{base}{}", link.trim_start_matches("./"));
+        let bytes = read_entry(&entry)?;
+        if let Some(want) = text("Record3/DataLink/MD5ChecksumPointData") {
+            checksum_ok = Some(hex(&Md5::digest(&bytes)).eq_ignore_ascii_case(want.trim()));
+        }
+        let width = match data_type {
+            'D' => 8,
+            'F' | 'L' => 4,
+            'I' => 2,
+            c => {
+                return Err(field_err(
+                    "Record1/Axes/CZ/DataType",
+                    format!("unknown data type `{c}` (D, F, L or I)"),
+                ))
+            }
+        };
+        if bytes.len() != n * width {
+            return Err(X3pError::Data {
+                path: path.to_path_buf(),
+                entry,
+                message: format!(
+                    "{} bytes for {nx}×{ny} points of type {data_type} ({} expected)",
+                    bytes.len(),
+                    n * width
+                ),
+            });
+        }
+        for (k, c) in bytes.chunks_exact(width).enumerate() {
+            let v = match data_type {
+                'D' => f64::from_le_bytes(c.try_into().unwrap_or([0; 8])),
+                'F' => f32::from_le_bytes(c.try_into().unwrap_or([0; 4])) as f64,
+                'L' => i32::from_le_bytes(c.try_into().unwrap_or([0; 4])) as f64,
+                _ => i16::from_le_bytes(c.try_into().unwrap_or([0; 2])) as f64,
+            };
+            z[k] = v;
+        }
+    } else if let Some(list) = find("Record3/DataList") {
+        let data: Vec<_> = list
+            .children()
+            .filter(|c| c.is_element() && c.tag_name().name() == "Datum")
+            .collect();
+        if data.len() != n {
+            return Err(field_err(
+                "Record3/DataList",
+                format!("{} Datum elements for {nx}×{ny} points", data.len()),
+            ));
+        }
+        for (k, d) in data.iter().enumerate() {
+            let t = d.text().map(str::trim).unwrap_or("");
+            if !t.is_empty() {
+                z[k] = t
+                    .parse::<f64>()
+                    .map_err(|_| field_err("Record3/DataList/Datum", format!("`{t}` at point {k}")))?;
+            }
+        }
+    } else {
+        return Err(field_err(
+            "Record3/DataLink/PointDataLink",
+            "missing (and no DataList)".into(),
+        ));
+    }
+    let mut valid: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
+    if let Some(link) = text("Record3/ValidPointsLink") {
+        let entry = format!("{base}{}", link.trim_start_matches("./"));
+        let bits = read_entry(&entry)?;
+        if bits.len() * 8 < n {
+            return Err(X3pError::Data {
+                path: path.to_path_buf(),
+                entry,
+                message: format!("{} bytes of validity bits for {n} points", bits.len()),
+            });
+        }
+        for (k, v) in valid.iter_mut().enumerate() {
+            *v &= bits[k / 8] >> (k % 8) & 1 == 1;
+        }
+    }
+    for (v, ok) in z.iter_mut().zip(&valid) {
+        // (no `+ 0.0` when there is no offset: it would turn −0.0 into +0.0)
+        *v = match (*ok, offset_mm == 0.0) {
+            (false, _) => f64::NAN,
+            (true, true) => *v * scale,
+            (true, false) => *v * scale + offset_mm,
+        };
+    }
+    let instrument = match (
+        text("Record2/Instrument/Manufacturer"),
+        text("Record2/Instrument/Model"),
+    ) {
+        (Some(a), Some(b)) => Some(format!("{a} {b}")),
+        (a, b) => a.or(b),
+    };
+    Ok(X3p {
+        nx,
+        ny,
+        pitch_x_mm: pitch[0],
+        pitch_y_mm: pitch[1],
+        z_mm: z,
+        valid,
+        data_type,
+        main_xml,
+        creator: text("Record2/Creator"),
+        instrument,
+        data_checksum_ok: checksum_ok,
+    })
+}
+
+fn main_xml(hf: &Heightfield, data_md5: &str) -> String {
+    let pitch_m = hf.pitch_mm * 1e-3;
+    format!(
+        r#"<?xml version="1.0" encoding="UTF-8" standalone="no" ?>
+<p:ISO5436_2 xmlns:p="http://www.opengps.eu/2008/ISO5436_2" xmlns:xsi="http://www.w3.org/2001/XMLSchema-instance" xsi:schemaLocation="http://www.opengps.eu/2008/ISO5436_2 http://www.opengps.eu/2008/ISO5436_2/ISO5436_2.xsd">
+  <Record1>
+    <Revision>ISO5436 - 2000</Revision>
+    <FeatureType>SUR</FeatureType>
+    <Axes>
+      <CX>
+        <AxisType>I</AxisType>
+        <DataType>D</DataType>
+        <Increment>{pitch_m:e}</Increment>
+        <Offset>0</Offset>
+      </CX>
+      <CY>
+        <AxisType>I</AxisType>
+        <DataType>D</DataType>
+        <Increment>{pitch_m:e}</Increment>
+        <Offset>0</Offset>
+      </CY>
+      <CZ>
+        <AxisType>A</AxisType>
+        <DataType>D</DataType>
+        <Increment>1.0E-3</Increment>
+        <Offset>0</Offset>
+      </CZ>
+    </Axes>
+  </Record1>
+  <Record2>
+    <Date>1970-01-01T00:00:00+00:00</Date>
+    <Creator>brdfmill {version}</Creator>
+    <Instrument>
+      <Manufacturer>brdfmill</Manufacturer>
+      <Model>simulated surface ({periodic})</Model>
+      <Serial>not available</Serial>
+      <Version>{version}</Version>
+    </Instrument>
+    <CalibrationDate>1970-01-01T00:00:00+00:00</CalibrationDate>
+    <ProbingSystem>
+      <Type>Software</Type>
+      <Identification>brdfmill</Identification>
+    </ProbingSystem>
+    <Comment>Heights stored in mm: z [m] = 1.0E-3 * value.</Comment>
+  </Record2>
+  <Record3>
+    <MatrixDimension>
+      <SizeX>{nx}</SizeX>
+      <SizeY>{ny}</SizeY>
+      <SizeZ>1</SizeZ>
+    </MatrixDimension>
+    <DataLink>
+      <PointDataLink>bindata/data.bin</PointDataLink>
+      <MD5ChecksumPointData>{data_md5}</MD5ChecksumPointData>
+    </DataLink>
+  </Record3>
+  <Record4>
+    <ChecksumFile>md5checksum.hex</ChecksumFile>
+  </Record4>
+</p:ISO5436_2>
+"#,
+        version = env!("CARGO_PKG_VERSION"),
+        periodic = if hf.periodic { "periodic" } else { "not periodic" },
+        nx = hf.nx,
+        ny = hf.ny,
+    )
+}
+
+/// Write a heightfield as an X3P file, atomically: `main.xml` (Records 1–4), `bindata/data.bin` (f64
+/// little-endian, heights in mm with `CZ/Increment = 1.0E-3`, see the module notes) with its MD5 in
+/// `MD5ChecksumPointData`, and `md5checksum.hex` (the MD5 of `main.xml`).
+pub fn write(path: &Path, hf: &Heightfield) -> Result<(), X3pError> {
+    hf.check_invariants().map_err(|message| X3pError::Invalid {
+        path: path.to_path_buf(),
+        message,
+    })?;
+    let data: Vec<u8> = hf.z_mm.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let xml = main_xml(hf, &hex(&Md5::digest(&data)));
+    let sum = format!("{} *main.xml\n", hex(&Md5::digest(xml.as_bytes())));
+    crate::io::write_atomic_with(path, |w| {
+        let mut buf = std::io::Cursor::new(Vec::new());
+        {
+            let mut zw = zip::ZipWriter::new(&mut buf);
+            let opts = zip::write::SimpleFileOptions::default()
+                .compression_method(zip::CompressionMethod::Deflated)
+                .last_modified_time(zip::DateTime::default());
+            let ze = |e: zip::result::ZipError| std::io::Error::other(e.to_string());
+            zw.start_file("main.xml", opts).map_err(ze)?;
+            zw.write_all(xml.as_bytes())?;
+            zw.add_directory("bindata/", opts).map_err(ze)?;
+            zw.start_file("bindata/data.bin", opts).map_err(ze)?;
+            zw.write_all(&data)?;
+            zw.start_file("md5checksum.hex", opts).map_err(ze)?;
+            zw.write_all(sum.as_bytes())?;
+            zw.finish().map_err(ze)?;
+        }
+        w.write_all(buf.get_ref())
+    })?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn writes_and_reads_back_bit_identical() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut hf = Heightfield::flat(7, 5, 0.0025, false, 0.0);
+        for (k, v) in hf.z_mm.iter_mut().enumerate() {
+            *v = -((k as f64) * 0.1234567).sin().abs() * 1e-3 / 3.0;
+        }
+        let p = dir.path().join("s.x3p");
+        write(&p, &hf).unwrap();
+        let r = read(&p).unwrap();
+        assert_eq!((r.nx, r.ny), (7, 5));
+        assert_eq!(r.invalid_count(), 0);
+        assert_eq!(r.data_checksum_ok, Some(true));
+        assert!((r.pitch_x_mm - 0.0025).abs() < 1e-15);
+        let a: Vec<u64> = hf.z_mm.iter().map(|v| v.to_bits()).collect();
+        let b: Vec<u64> = r.z_mm.iter().map(|v| v.to_bits()).collect();
+        assert_eq!(a, b);
+    }
+
+    #[test]
+    fn refuses_non_finite_heights_and_garbage() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut hf = Heightfield::flat(3, 3, 0.01, false, 0.0);
+        hf.z_mm[4] = f64::NAN;
+        let p = dir.path().join("bad.x3p");
+        assert!(matches!(write(&p, &hf), Err(X3pError::Invalid { .. })));
+        assert!(!p.exists());
+        std::fs::write(&p, b"not a zip").unwrap();
+        assert!(matches!(read(&p), Err(X3pError::Zip { .. })));
+    }
+
+    #[test]
+    fn fills_invalid_points_from_neighbours() {
+        let s = X3p {
+            nx: 3,
+            ny: 1,
+            pitch_x_mm: 0.001,
+            pitch_y_mm: 0.001,
+            z_mm: vec![1.0, f64::NAN, 3.0],
+            valid: vec![true, false, true],
+            data_type: 'D',
+            main_xml: "main.xml".into(),
+            creator: None,
+            instrument: None,
+            data_checksum_ok: None,
+        };
+        assert_eq!(s.heightfield().unwrap().z_mm, vec![1.0, 2.0, 3.0]);
+    }
+}
