@@ -26,6 +26,7 @@ pub mod fft2;
 pub mod geometry;
 pub mod heightfield;
 pub mod io;
+pub mod job;
 pub mod ndf;
 pub mod npy;
 pub mod optics;

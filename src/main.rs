@@ -16,6 +16,9 @@ struct Cli {
 
 #[derive(Subcommand, Debug)]
 enum Command {
+    /// Run every stage of a job file (BRDF → NDF → facets → toolpath → simulation → verification) and
+    /// write every artifact and an HTML report to DIR.
+    Run(cli::run::Args),
     /// BRDF → target NDF in slope space (half-angle distribution, Lucy–Richardson deconvolution of the base
     /// lobe, mean tilt removed). Writes ndf.json and optionally a PNG.
     Ndf(cli::ndf::Args),
@@ -38,6 +41,7 @@ enum Command {
 fn main() {
     let cli = Cli::parse();
     let result: Result<()> = match cli.command {
+        Command::Run(a) => cli::run::run(&a),
         Command::Ndf(a) => cli::ndf::run(&a),
         Command::Facets(a) => cli::facets::run(&a),
         Command::Toolpath(a) => cli::toolpath::run(&a),

@@ -3,6 +3,7 @@
 pub mod emulate;
 pub mod facets;
 pub mod ndf;
+pub mod run;
 pub mod simulate;
 pub mod stream;
 pub mod toolpath;
