@@ -1,6 +1,6 @@
 //! `brdfmill facets`: ndf.json → DIR/tile.json, tile.npy, tile.png, tile.stl.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use brdfmill::facets::{self, format::Source, FacetsConfig, SteepPolicy, TileFile};
 use brdfmill::ndf::NdfFile;
 use std::path::PathBuf;
@@ -37,25 +37,9 @@ pub struct Args {
     pub out: PathBuf,
 }
 
-/// Parse `WxH`.
-pub fn parse_pair(s: &str, what: &str) -> Result<(usize, usize)> {
-    let (a, b) = s
-        .split_once(['x', 'X'])
-        .with_context(|| format!("{what} `{s}`: expected WxH, e.g. 32x32"))?;
-    let a: usize = a
-        .trim()
-        .parse()
-        .with_context(|| format!("{what} `{s}`: `{a}` is not a whole number"))?;
-    let b: usize = b
-        .trim()
-        .parse()
-        .with_context(|| format!("{what} `{s}`: `{b}` is not a whole number"))?;
-    Ok((a, b))
-}
-
 /// Run the subcommand.
 pub fn run(a: &Args) -> Result<()> {
-    let (w, h) = parse_pair(&a.facets, "--facets")?;
+    let (w, h) = super::parse_pair::<usize>(&a.facets, "--facets", "WxH, e.g. 32x32")?;
     let steep = match a.steep.as_str() {
         "truncate" => SteepPolicy::Truncate,
         "clamp" => SteepPolicy::Clamp,

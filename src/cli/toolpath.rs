@@ -49,22 +49,6 @@ pub struct Args {
     pub out: PathBuf,
 }
 
-/// Parse `XxY` as two positive lengths.
-pub fn parse_area(s: &str) -> Result<[f64; 2]> {
-    let (a, b) = s
-        .split_once(['x', 'X'])
-        .ok_or_else(|| anyhow!("--area `{s}`: expected XxY in mm, e.g. 40x40"))?;
-    let a: f64 = a
-        .trim()
-        .parse()
-        .map_err(|_| anyhow!("--area `{s}`: `{a}` is not a number"))?;
-    let b: f64 = b
-        .trim()
-        .parse()
-        .map_err(|_| anyhow!("--area `{s}`: `{b}` is not a number"))?;
-    Ok([a, b])
-}
-
 /// Build the configuration from the arguments.
 pub fn config(a: &Args) -> Result<ToolpathConfig> {
     Ok(ToolpathConfig {
@@ -75,7 +59,10 @@ pub fn config(a: &Args) -> Result<ToolpathConfig> {
             "wax" => Stock::Wax,
             s => bail!("--stock `{s}`: expected aluminium or wax"),
         },
-        area_mm: parse_area(&a.area)?,
+        area_mm: {
+            let (x, y) = super::parse_pair::<f64>(&a.area, "--area", "XxY in mm, e.g. 40x40")?;
+            [x, y]
+        },
         scallop_um: a.scallop_um,
         stepover_mm: a.stepover_mm.unwrap_or(0.0),
         angle_deg: a.angle_deg,
