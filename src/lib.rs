@@ -20,6 +20,7 @@
 //! relates to the NDF by `D(wm) = P22(p, q) / cos⁴θm`.
 #![warn(missing_docs)]
 
+pub mod analyze;
 pub mod brdf;
 pub mod facets;
 pub mod fft2;

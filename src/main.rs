@@ -36,6 +36,9 @@ enum Command {
     Stream(cli::stream::Args),
     /// Run a virtual GRBL 1.1 controller on a pseudo-terminal and print its port path (for tests and dry runs).
     Emulate(cli::emulate::Args),
+    /// A measured (X3P) or simulated (.npy) surface → NDF and BRDF, geometric and wave optics, with a report
+    /// in DIR.
+    Analyze(cli::analyze::Args),
 }
 
 fn main() {
@@ -48,6 +51,7 @@ fn main() {
         Command::Simulate(a) => cli::simulate::run(&a),
         Command::Stream(a) => cli::stream::run(&a),
         Command::Emulate(a) => cli::emulate::run(&a),
+        Command::Analyze(a) => cli::analyze::run(&a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

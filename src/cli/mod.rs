@@ -1,5 +1,6 @@
 //! One module per subcommand: its arguments (with units in the help) and its thin driver.
 
+pub mod analyze;
 pub mod emulate;
 pub mod facets;
 pub mod ndf;
