@@ -306,43 +306,7 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
         rgb: None,
     }
     .render();
-    // BRDF slices over ψ̄ at normal incidence: |ψ̄| ≤ 2·max_slope (the geometric lobe's extent)
-    let half = ((2.0 * max_slope / slice.dpsi).ceil() as usize).clamp(4, slice.m / 2 - 1);
-    let k = 2 * half + 1;
-    let c = slice.m / 2;
-    let mut fw = vec![0.0; k * k];
-    let mut fg = vec![0.0; k * k];
-    for b in 0..k {
-        for a in 0..k {
-            let (sa, sb) = (c + a - half, c + b - half);
-            fw[b * k + a] = slice.f[sb * slice.m + sa];
-            if let Some(wo) = slice.wo(sa, sb) {
-                fg[b * k + a] = geo.eval(&wi, &wo)[0];
-            }
-        }
-    }
-    let ext = half as f64 * slice.dpsi;
-    let map = |v: &[f64], title: &str| {
-        Heatmap {
-            values: v,
-            nx: k,
-            ny: k,
-            x_range: (-ext, ext),
-            y_range: (-ext, ext),
-            title: title.into(),
-            x_label: "psi_x = sin(theta_o) cos(phi_o)".into(),
-            y_label: "psi_y".into(),
-            value_label: "f (1/sr, log10)".into(),
-            scale: Scale::Log { decades: 4.0 },
-            plot_px: 420,
-            rgb: None,
-        }
-        .render()
-    };
-    let (a, b) = (map(&fg, "geometric (microfacet)"), map(&fw, "wave (Kirchhoff, FFT)"));
-    let mut slices_png = Canvas::new(a.width + b.width, a.height.max(b.height));
-    slices_png.blit(&a, 0, 0);
-    slices_png.blit(&b, a.width as i64, 0);
+    let slices_png = wave_vs_geometric_png(&slice, &geo, &wi, max_slope);
     let surface_png = hf.relief_png("surface (mean plane removed, missing points filled)", 900);
 
     let mut notes = vec![format!(
@@ -403,6 +367,48 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
     );
     crate::io::write_atomic(&out.join("report.html"), html.as_bytes())?;
     Ok(analysis)
+}
+
+/// The geometric (microfacet) and wave (Kirchhoff, FFT) BRDFs side by side over ψ̄ at incidence `wi`, on
+/// `|ψ̄| ≤ 2·max_slope` (the geometric lobe's extent), log scale.
+pub fn wave_vs_geometric_png(slice: &wave::WaveSlice, geo: &MicrofacetBrdf, wi: &Vec3, max_slope: f64) -> Canvas {
+    let half = ((2.0 * max_slope / slice.dpsi).ceil() as usize).clamp(4, slice.m / 2 - 1);
+    let k = 2 * half + 1;
+    let c = slice.m / 2;
+    let mut fw = vec![0.0; k * k];
+    let mut fg = vec![0.0; k * k];
+    for b in 0..k {
+        for a in 0..k {
+            let (sa, sb) = (c + a - half, c + b - half);
+            fw[b * k + a] = slice.f[sb * slice.m + sa];
+            if let Some(wo) = slice.wo(sa, sb) {
+                fg[b * k + a] = geo.eval(wi, &wo)[0];
+            }
+        }
+    }
+    let ext = half as f64 * slice.dpsi;
+    let map = |v: &[f64], title: &str| {
+        Heatmap {
+            values: v,
+            nx: k,
+            ny: k,
+            x_range: (-ext, ext),
+            y_range: (-ext, ext),
+            title: title.into(),
+            x_label: "psi_x = sin(theta_o) cos(phi_o)".into(),
+            y_label: "psi_y".into(),
+            value_label: "f (1/sr, log10)".into(),
+            scale: Scale::Log { decades: 4.0 },
+            plot_px: 420,
+            rgb: None,
+        }
+        .render()
+    };
+    let (a, b) = (map(&fg, "geometric (microfacet)"), map(&fw, "wave (Kirchhoff, FFT)"));
+    let mut png = Canvas::new(a.width + b.width, a.height.max(b.height));
+    png.blit(&a, 0, 0);
+    png.blit(&b, a.width as i64, 0);
+    png
 }
 
 fn esc(s: &str) -> String {

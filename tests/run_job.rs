@@ -75,6 +75,7 @@ fn default_job_produces_every_artifact_and_a_rendered_report() {
         "sim.png",
         "deviation.png",
         "sim.json",
+        "wave.png",
         "metrics.json",
         "report.html",
     ] {
@@ -95,6 +96,10 @@ fn default_job_produces_every_artifact_and_a_rendered_report() {
         assert_eq!(m[side]["cov_ratio"].as_array().unwrap().len(), 2);
     }
     assert!(m["pass"].is_boolean());
+    assert!(
+        m.get("diffraction").is_some(),
+        "the diffraction check is recorded (null when there is none)"
+    );
     // the design tile against its target: only the facet discretisation separates them
     let d = &m["design"];
     assert!(
@@ -118,7 +123,7 @@ fn default_job_produces_every_artifact_and_a_rendered_report() {
         );
     }
     // one page, offline: images embedded, nothing fetched
-    assert!(html.matches("src=\"data:image/png;base64,").count() >= 6);
+    assert!(html.matches("src=\"data:image/png;base64,").count() >= 7);
     assert!(!html.contains("http://") && !html.contains("https://") && !html.contains("<script"));
     // rendered by a real browser: its images show
     if let Some(chrome) = chromium() {

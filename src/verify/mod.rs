@@ -34,4 +34,6 @@ pub struct Metrics {
     pub reference: String,
     /// Findings that explain shortfalls (bit radius, concavity, discretisation), in plain words.
     pub notes: Vec<String>,
+    /// The diffraction warning of the scallop period (`optics::wave::diffraction_warning`), if any.
+    pub diffraction: Option<String>,
 }
