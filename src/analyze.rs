@@ -184,19 +184,7 @@ fn load(path: &Path, cfg: &Config) -> Result<(Heightfield, Vec<bool>, usize), An
             })?;
             let valid: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
             let missing = valid.iter().filter(|v| !**v).count();
-            let x = crate::x3p::X3p {
-                nx,
-                ny,
-                pitch_x_mm: pitch * 1e-3,
-                pitch_y_mm: pitch * 1e-3,
-                z_mm: z,
-                valid: valid.clone(),
-                data_type: 'D',
-                main_xml: String::new(),
-                creator: None,
-                instrument: None,
-                data_checksum_ok: None,
-            };
+            let x = crate::x3p::X3p::from_grid(nx, ny, pitch * 1e-3, z, valid.clone());
             Ok((x.heightfield().map_err(input)?, valid, missing))
         }
         _ => Err(input("expected a .x3p or .npy file".into())),
@@ -233,19 +221,7 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
         .sqrt()
         * 1e3;
     // slopes, skipping differences that touch a missing point
-    let masked = crate::x3p::X3p {
-        nx: hf.nx,
-        ny: hf.ny,
-        pitch_x_mm: hf.pitch_mm,
-        pitch_y_mm: hf.pitch_mm,
-        z_mm: hf.z_mm.clone(),
-        valid: valid.clone(),
-        data_type: 'D',
-        main_xml: String::new(),
-        creator: None,
-        instrument: None,
-        data_checksum_ok: None,
-    };
+    let masked = crate::x3p::X3p::from_grid(hf.nx, hf.ny, hf.pitch_mm, hf.z_mm.clone(), valid.clone());
     let slopes = masked.masked_slopes(1);
     if slopes.is_empty() {
         return Err(bad("no slope could be formed from valid points".into()));
@@ -405,10 +381,7 @@ pub fn wave_vs_geometric_png(slice: &wave::WaveSlice, geo: &MicrofacetBrdf, wi: 
         .render()
     };
     let (a, b) = (map(&fg, "geometric (microfacet)"), map(&fw, "wave (Kirchhoff, FFT)"));
-    let mut png = Canvas::new(a.width + b.width, a.height.max(b.height));
-    png.blit(&a, 0, 0);
-    png.blit(&b, a.width as i64, 0);
-    png
+    Canvas::hstack(&[a, b])
 }
 
 fn esc(s: &str) -> String {

@@ -359,16 +359,8 @@ pub fn run(ready: &Ready, out: &Path, progress: &mut dyn FnMut(Stage, bool)) -> 
     let n =
         ndf::run_with_kernel(&job.ndf, &ready.target, kernel.as_ref()).map_err(|e| stage_err("ndf")(e.to_string()))?;
     let ndf_file = NdfFile::from(&n);
-    let ndf_png = {
-        let left = ndf::render_png(&n.observed, "observed half-angle distribution O");
-        let right = ndf::render_png(&n.target, "target NDF (deconvolved)");
-        let mut cv = crate::plot::Canvas::new(left.width + right.width, left.height);
-        cv.blit(&left, 0, 0);
-        cv.blit(&right, left.width as i64, 0);
-        cv
-    };
     write(out, "ndf.json", ndf_file.to_json().as_bytes(), &mut artifacts)?;
-    write(out, "ndf.png", &ndf_png.to_png(), &mut artifacts)?;
+    write(out, "ndf.png", &ndf::render_pair_png(&n).to_png(), &mut artifacts)?;
     progress(Stage::Ndf, false);
     lap(Stage::Ndf, &mut timings);
 
@@ -384,19 +376,12 @@ pub fn run(ready: &Ready, out: &Path, progress: &mut dyn FnMut(Stage, bool)) -> 
         },
         "tile.npy",
     );
-    let (lo, _) = tile.heightfield.range();
-    let tile_png = tile
-        .heightfield
-        .relief_png(&format!("design tile, relief {:.0} µm", -lo * 1000.0), 1024);
+    let tile_png = tile.relief_png();
     write(out, "tile.json", tile_file.to_json().as_bytes(), &mut artifacts)?;
     tile.heightfield.write_npy(&out.join("tile.npy"))?;
     artifacts.push(out.join("tile.npy"));
     write(out, "tile.png", &tile_png.to_png(), &mut artifacts)?;
-    let stl = facets::stl::to_binary_stl(
-        &facets::stl::tile_solid(&tile.arrangement, &tile.z_mm, job.facets.facet_mm, lo - 1.0),
-        "brdfmill tile, mm",
-    );
-    write(out, "tile.stl", &stl, &mut artifacts)?;
+    write(out, "tile.stl", &tile.stl(), &mut artifacts)?;
     progress(Stage::Facets, false);
     lap(Stage::Facets, &mut timings);
 
@@ -526,20 +511,11 @@ pub fn run(ready: &Ready, out: &Path, progress: &mut dyn FnMut(Stage, bool)) -> 
     )?;
 
     // figures
-    let ndf_row = {
-        let panels = [
-            ndf::render_png(&n.observed, "target: observed O"),
-            ndf::render_png(&design, "design tile ⊛ base lobe"),
-            ndf::render_png(&milled, "milled (simulated)"),
-        ];
-        let mut cv = crate::plot::Canvas::new(panels.iter().map(|p| p.width).sum(), panels[0].height);
-        let mut x = 0;
-        for p in &panels {
-            cv.blit(p, x, 0);
-            x += p.width as i64;
-        }
-        cv
-    };
+    let ndf_row = crate::plot::Canvas::hstack(&[
+        ndf::render_png(&n.observed, "target: observed O"),
+        ndf::render_png(&design, "design tile ⊛ base lobe"),
+        ndf::render_png(&milled, "milled (simulated)"),
+    ]);
     let design_brdf = geometric::MicrofacetBrdf::new(design.clone(), ready.target.material);
     let milled_brdf = geometric::MicrofacetBrdf::new(milled.clone(), ready.target.material);
     let tf = |a: &crate::geometry::Vec3, b: &crate::geometry::Vec3| ready.target.eval(a, b);

@@ -97,6 +97,19 @@ impl Canvas {
         }
     }
 
+    /// Panels side by side, top-aligned, on a white canvas as tall as the tallest.
+    pub fn hstack(panels: &[Canvas]) -> Canvas {
+        let w = panels.iter().map(|p| p.width).sum();
+        let h = panels.iter().map(|p| p.height).max().unwrap_or(0);
+        let mut cv = Canvas::new(w, h);
+        let mut x = 0i64;
+        for p in panels {
+            cv.blit(p, x, 0);
+            x += p.width as i64;
+        }
+        cv
+    }
+
     /// Encode as PNG bytes.
     pub fn to_png(&self) -> Vec<u8> {
         let mut out = Vec::new();

@@ -122,6 +122,24 @@ pub struct X3p {
 }
 
 impl X3p {
+    /// A surface that was not read from a file (no archive metadata): heights in mm on one pitch, with a
+    /// validity mask. Used to treat a `.npy` heightfield or a masked copy like a scan.
+    pub fn from_grid(nx: usize, ny: usize, pitch_mm: f64, z_mm: Vec<f64>, valid: Vec<bool>) -> Self {
+        Self {
+            nx,
+            ny,
+            pitch_x_mm: pitch_mm,
+            pitch_y_mm: pitch_mm,
+            z_mm,
+            valid,
+            data_type: 'D',
+            main_xml: String::new(),
+            creator: None,
+            instrument: None,
+            data_checksum_ok: None,
+        }
+    }
+
     /// Number of invalid points.
     pub fn invalid_count(&self) -> usize {
         self.valid.iter().filter(|v| !**v).count()
@@ -554,19 +572,7 @@ mod tests {
 
     #[test]
     fn fills_invalid_points_from_neighbours() {
-        let s = X3p {
-            nx: 3,
-            ny: 1,
-            pitch_x_mm: 0.001,
-            pitch_y_mm: 0.001,
-            z_mm: vec![1.0, f64::NAN, 3.0],
-            valid: vec![true, false, true],
-            data_type: 'D',
-            main_xml: "main.xml".into(),
-            creator: None,
-            instrument: None,
-            data_checksum_ok: None,
-        };
+        let s = X3p::from_grid(3, 1, 0.001, vec![1.0, f64::NAN, 3.0], vec![true, false, true]);
         assert_eq!(s.heightfield().unwrap().z_mm, vec![1.0, 2.0, 3.0]);
     }
 }

@@ -70,22 +70,8 @@ pub fn run(a: &Args) -> Result<()> {
         "tile.npy",
     );
     // Everything is computed before anything is written.
-    let (lo, _) = tile.heightfield.range();
-    let stl = facets::stl::to_binary_stl(
-        &facets::stl::tile_solid(&tile.arrangement, &tile.z_mm, cfg.facet_mm, lo - 1.0),
-        "brdfmill tile, mm",
-    );
-    let png = tile
-        .heightfield
-        .relief_png(
-            &format!(
-                "tile {w}x{h} facets of {} mm, relief {:.1} µm",
-                cfg.facet_mm,
-                (0.0 - lo) * 1000.0
-            ),
-            1024,
-        )
-        .to_png();
+    let stl = tile.stl();
+    let png = tile.relief_png().to_png();
     let json = file.to_json();
     brdfmill::io::write_atomic(&a.out.join("tile.stl"), &stl)?;
     brdfmill::io::write_atomic(&a.out.join("tile.png"), &png)?;

@@ -60,14 +60,7 @@ pub fn run(a: &Args) -> Result<()> {
     let n = ndf::run(&cfg, &brdf, base.as_ref())?;
     let file = NdfFile::from(&n);
     // Render everything before writing anything, so an error leaves no partial output.
-    let png = a.png.as_ref().map(|_| {
-        let left = ndf::render_png(&n.observed, "observed half-angle distribution O");
-        let right = ndf::render_png(&n.target, "target NDF (deconvolved)");
-        let mut cv = brdfmill::plot::Canvas::new(left.width + right.width, left.height.max(right.height));
-        cv.blit(&left, 0, 0);
-        cv.blit(&right, left.width as i64, 0);
-        cv.to_png()
-    });
+    let png = a.png.as_ref().map(|_| ndf::render_pair_png(&n).to_png());
     file.write(&a.out)?;
     if let (Some(path), Some(bytes)) = (&a.png, png) {
         brdfmill::io::write_atomic(path, &bytes)?;

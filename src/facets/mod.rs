@@ -237,6 +237,33 @@ pub struct Tile {
     pub seams: SeamStats,
 }
 
+impl Tile {
+    /// The exact faceted solid of one tile as binary STL (mm), its flat bottom 1 mm below the lowest point.
+    pub fn stl(&self) -> Vec<u8> {
+        let (lo, _) = self.heightfield.range();
+        stl::to_binary_stl(
+            &stl::tile_solid(&self.arrangement, &self.z_mm, self.config.facet_mm, lo - 1.0),
+            "brdfmill tile, mm",
+        )
+    }
+
+    /// The tile's shaded relief with a title that gives its facets and relief.
+    pub fn relief_png(&self) -> crate::plot::Canvas {
+        let (lo, _) = self.heightfield.range();
+        let c = &self.config;
+        self.heightfield.relief_png(
+            &format!(
+                "tile {}x{} facets of {} mm, relief {:.1} µm",
+                c.facets_x,
+                c.facets_y,
+                c.facet_mm,
+                -lo * 1000.0
+            ),
+            1024,
+        )
+    }
+}
+
 /// Restrict the NDF to the machinable cone: returns the density used for sampling and the mass beyond it.
 fn machinable(ndf: &SlopeGrid, cfg: &FacetsConfig) -> Result<(SlopeGrid, f64), FacetsError> {
     ndf.check_invariants().map_err(FacetsError::Ndf)?;

@@ -232,6 +232,14 @@ pub fn run_with_kernel(cfg: &NdfConfig, brdf: &Brdf, base: Option<&Kernel>) -> R
     })
 }
 
+/// The stage's figure: the observed half-angle distribution and the deconvolved target side by side.
+pub fn render_pair_png(n: &Ndf) -> crate::plot::Canvas {
+    crate::plot::Canvas::hstack(&[
+        render_png(&n.observed, "observed half-angle distribution O"),
+        render_png(&n.target, "target NDF (deconvolved)"),
+    ])
+}
+
 /// Draw a slope density as a false-colour PNG figure (log scale over 4 decades, axes in slope units).
 pub fn render_png(grid: &SlopeGrid, title: &str) -> crate::plot::Canvas {
     let d = &grid.domain;

@@ -108,12 +108,7 @@ pub fn slices(items: &[(&str, BrdfFn)], incident_deg: &[f64]) -> Canvas {
             .render()
         })
         .collect();
-    let (w, h) = (panels[0].width, panels[0].height);
-    let mut cv = Canvas::new(w * panels.len() as u32, h);
-    for (k, p) in panels.iter().enumerate() {
-        cv.blit(p, (k as u32 * w) as i64, 0);
-    }
-    cv
+    Canvas::hstack(&panels)
 }
 
 #[cfg(test)]
