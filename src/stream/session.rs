@@ -769,6 +769,23 @@ impl Session<'_> {
             .map(|m| [m[0] - self.wco[0], m[1] - self.wco[1], m[2] - self.wco[2]])
     }
 
+    /// An `ok` (`code` = None) or `error:code` that arrives while stopping: credit it to the oldest line in
+    /// flight and journal it best-effort (the stop itself must not fail on the journal).
+    fn late_answer(&mut self, code: Option<u16>) {
+        if let Some(Tag::Line(n)) = self.counter.answered() {
+            match code {
+                None => {
+                    let _ = self.journal(&Record::Ok { line: n });
+                    self.planned.push_back(n);
+                }
+                Some(code) => {
+                    let _ = self.journal(&Record::Error { line: n, code });
+                    self.errors.insert(n);
+                }
+            }
+        }
+    }
+
     fn on_status(&mut self, st: Status) {
         if let Some(w) = st.wco {
             self.wco = w;
@@ -1203,18 +1220,8 @@ impl Session<'_> {
                 .min(Duration::from_millis(50));
             if let Some(l) = self.read_line(wait).map_err(|e| format!("{e:?}"))? {
                 match parse_response(&l) {
-                    Response::Ok => {
-                        if let Some(Tag::Line(n)) = self.counter.answered() {
-                            let _ = self.journal(&Record::Ok { line: n });
-                            self.planned.push_back(n);
-                        }
-                    }
-                    Response::Error(code) => {
-                        if let Some(Tag::Line(n)) = self.counter.answered() {
-                            let _ = self.journal(&Record::Error { line: n, code });
-                            self.errors.insert(n);
-                        }
-                    }
+                    Response::Ok => self.late_answer(None),
+                    Response::Error(code) => self.late_answer(Some(code)),
                     Response::Status(st) => {
                         let s = st.state;
                         self.on_status(st.clone());
@@ -1246,18 +1253,8 @@ impl Session<'_> {
                 .map_err(|e| format!("{e:?}"))?
             {
                 match parse_response(&l) {
-                    Response::Ok => {
-                        if let Some(Tag::Line(n)) = self.counter.answered() {
-                            let _ = self.journal(&Record::Ok { line: n });
-                            self.planned.push_back(n);
-                        }
-                    }
-                    Response::Error(code) => {
-                        if let Some(Tag::Line(n)) = self.counter.answered() {
-                            let _ = self.journal(&Record::Error { line: n, code });
-                            self.errors.insert(n);
-                        }
-                    }
+                    Response::Ok => self.late_answer(None),
+                    Response::Error(code) => self.late_answer(Some(code)),
                     Response::Banner(_) => banner = true,
                     Response::Status(st) => self.on_status(st),
                     _ => {}
