@@ -1,7 +1,7 @@
 //! Sweep throughput in swept cells per second: a zigzag finishing raster (1 mm ball, 0.063 mm stepover,
 //! points every 10 µm over a wavy surface) across 2×2 mm of stock at 5 µm.
 
-use brdfmill::simulate::{self, SimulateConfig, ToolShape};
+use brdfmill::simulate::{self, Shape, SimulateConfig};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::fmt::Write;
 
@@ -28,7 +28,7 @@ fn program() -> String {
 fn bench(c: &mut Criterion) {
     let text = program();
     let cfg = SimulateConfig {
-        tool: ToolShape::Ball { diameter_mm: 1.0 },
+        tool: Shape::Ball { diameter_mm: 1.0 },
         pitch_um: 5.0,
         ..Default::default()
     };

@@ -1,7 +1,8 @@
 //! Drop-cutter throughput: CL points per second for a 1024² heightfield with a 1 mm ball at 10 µm pitch.
 
 use brdfmill::heightfield::Heightfield;
-use brdfmill::toolpath::dropcutter::{Cutter, DropCutter, Edge};
+use brdfmill::tool::Shape;
+use brdfmill::toolpath::dropcutter::{DropCutter, Edge};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 fn bench(c: &mut Criterion) {
@@ -13,7 +14,7 @@ fn bench(c: &mut Criterion) {
             + 0.05 * (std::f64::consts::TAU * (3.0 * x + y)).sin()
             + 0.03 * (std::f64::consts::TAU * 5.0 * y).cos();
     }
-    let dc = DropCutter::new(&hf, Cutter::Ball { r: 0.5 }, Edge::Periodic);
+    let dc = DropCutter::new(&hf, Shape::Ball { diameter_mm: 1.0 }, Edge::Periodic);
     let mut g = c.benchmark_group("dropcutter");
     g.sample_size(10);
     g.throughput(Throughput::Elements((n * n) as u64));

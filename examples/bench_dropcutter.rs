@@ -6,7 +6,8 @@
 //! `cargo run --release --example bench_dropcutter -- [N] [DUMP_DIR]`
 
 use brdfmill::heightfield::Heightfield;
-use brdfmill::toolpath::dropcutter::{Cutter, DropCutter, Edge};
+use brdfmill::tool::Shape;
+use brdfmill::toolpath::dropcutter::{DropCutter, Edge};
 use std::time::Instant;
 
 /// A smooth random-looking periodic surface (sum of sinusoids), 0.2 mm deep.
@@ -30,7 +31,7 @@ fn main() {
     let args: Vec<String> = std::env::args().collect();
     let n: usize = args.get(1).and_then(|s| s.parse().ok()).unwrap_or(1024);
     let hf = surface(n, 0.01);
-    let dc = DropCutter::new(&hf, Cutter::Ball { r: 0.5 }, Edge::Periodic);
+    let dc = DropCutter::new(&hf, Shape::Ball { diameter_mm: 1.0 }, Edge::Periodic);
     let t = Instant::now();
     let cl = dc.surface();
     let s = t.elapsed().as_secs_f64();
@@ -42,12 +43,12 @@ fn main() {
     );
     if let Some(dir) = args.get(2) {
         let small = surface(256, 0.01);
-        let cl = DropCutter::new(&small, Cutter::Ball { r: 0.5 }, Edge::Open).surface();
+        let cl = DropCutter::new(&small, Shape::Ball { diameter_mm: 1.0 }, Edge::Open).surface();
         let dir = std::path::Path::new(dir);
         small.write_npy(&dir.join("hf_256.npy")).unwrap();
         cl.write_npy(&dir.join("cl_256.npy")).unwrap();
         let t = Instant::now();
-        let _ = DropCutter::new(&small, Cutter::Ball { r: 0.5 }, Edge::Open).surface();
+        let _ = DropCutter::new(&small, Shape::Ball { diameter_mm: 1.0 }, Edge::Open).surface();
         println!("dropcutter 256x256 open edges: {:.4} s", t.elapsed().as_secs_f64());
     }
     std::hint::black_box(cl);

@@ -5,13 +5,13 @@
 use brdfmill::brdf::Brdf;
 use brdfmill::facets::{self, FacetsConfig};
 use brdfmill::ndf::{self, NdfConfig};
-use brdfmill::simulate::{self, SimulateConfig, Simulation, ToolShape};
+use brdfmill::simulate::{self, Shape, SimulateConfig, Simulation};
 use brdfmill::toolpath::{self, machine::Machine, ToolpathConfig};
 use std::path::Path;
 
 const R: f64 = 0.5;
 
-fn sim(prog: &str, tool: ToolShape, pitch_um: f64) -> Simulation {
+fn sim(prog: &str, tool: Shape, pitch_um: f64) -> Simulation {
     let cfg = SimulateConfig {
         tool,
         pitch_um,
@@ -83,7 +83,7 @@ fn groove_error(s: &Simulation, a: [f64; 3], b: [f64; 3]) -> (f64, usize) {
 
 #[test]
 fn ball_grooves_have_the_exact_cross_section() {
-    let ball = ToolShape::Ball { diameter_mm: 2.0 * R };
+    let ball = Shape::Ball { diameter_mm: 2.0 * R };
     for (what, a, b) in [
         ("straight", [0.0, 0.0, -0.2], [3.0, 0.0, -0.2]),
         ("diagonal", [0.0, 0.0, -0.2], [2.3, 1.7, -0.2]),
@@ -117,7 +117,7 @@ fn arc_groove_is_a_torus_within_the_arc_tolerance() {
     // distance implied by the simulated height is off by at most that tolerance.
     let tol_um = 0.1;
     let cfg = SimulateConfig {
-        tool: ToolShape::Ball { diameter_mm: 2.0 * R },
+        tool: Shape::Ball { diameter_mm: 2.0 * R },
         pitch_um: 5.0,
         arc_tolerance_um: tol_um,
         ..Default::default()
@@ -158,10 +158,10 @@ fn flat_bit_leaves_a_flat_floor_and_bull_its_corner() {
         let t = (((x - a[0]) * dx + (y - a[1]) * dy) / (dx * dx + dy * dy)).clamp(0.0, 1.0);
         ((x - a[0] - t * dx).powi(2) + (y - a[1] - t * dy).powi(2)).sqrt()
     };
-    let flat = sim(prog, ToolShape::Flat { diameter_mm: 1.0 }, 5.0);
+    let flat = sim(prog, Shape::Flat { diameter_mm: 1.0 }, 5.0);
     let bull = sim(
         prog,
-        ToolShape::Bull {
+        Shape::Bull {
             diameter_mm: 1.0,
             corner_radius_mm: 0.2,
         },
@@ -216,7 +216,7 @@ fn finishing_program_reproduces_the_design_where_the_bit_reaches() {
         ..Default::default()
     };
     let prog = toolpath::run(&tcfg, &tile, &machine).unwrap();
-    let tool = ToolShape::Ball { diameter_mm: 1.0 };
+    let tool = Shape::Ball { diameter_mm: 1.0 };
     let t0 = std::time::Instant::now();
     let s = simulate::run(
         &prog.gcode,

@@ -2,7 +2,7 @@
 //! only the supported subset parse and simulate; every other one is refused with a line and column inside the
 //! file, and none makes the reader or the simulation panic.
 
-use brdfmill::simulate::{self, gcode, SimulateConfig, ToolShape};
+use brdfmill::simulate::{self, gcode, Shape, SimulateConfig};
 use std::path::{Path, PathBuf};
 
 const NCFILES: &str = "/usr/share/linuxcnc/ncfiles";
@@ -53,7 +53,7 @@ fn linuxcnc_samples_simulate_or_are_refused_with_line_and_column() {
         let nlines = text.lines().count().max(1);
         let name = f.strip_prefix(&dir).unwrap().display().to_string();
         let cfg = SimulateConfig {
-            tool: ToolShape::Ball { diameter_mm: 3.0 },
+            tool: Shape::Ball { diameter_mm: 3.0 },
             ..Default::default()
         };
         // read first, to size the stock grid to about a million cells whatever the program's extent

@@ -4,12 +4,13 @@
 
 use brdfmill::brdf::Brdf;
 use brdfmill::facets::{self, FacetsConfig};
+use brdfmill::gcode::moves::Move;
 use brdfmill::ndf::{self, NdfConfig};
 use brdfmill::stream::emulator::{Emulator, EmulatorConfig};
 use brdfmill::stream::program::Program;
 use brdfmill::stream::serial::SerialLink;
 use brdfmill::stream::session::{self, Config, Mode, Outcome, Silent};
-use brdfmill::toolpath::{self, machine::Machine, machine::Stock, moves::Move, ToolpathConfig};
+use brdfmill::toolpath::{self, machine::Machine, machine::Stock, ToolpathConfig};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 

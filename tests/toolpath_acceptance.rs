@@ -4,9 +4,10 @@
 
 use brdfmill::brdf::Brdf;
 use brdfmill::facets::{self, FacetsConfig};
+use brdfmill::gcode::moves::Move;
 use brdfmill::heightfield::Heightfield;
 use brdfmill::ndf::{self, NdfConfig};
-use brdfmill::toolpath::{self, check, machine::Machine, moves::Move, ToolpathConfig, ToolpathError};
+use brdfmill::toolpath::{self, check, machine::Machine, ToolpathConfig, ToolpathError};
 use std::path::Path;
 use std::sync::OnceLock;
 

@@ -3,7 +3,7 @@
 
 use anyhow::{anyhow, bail, Context, Result};
 use brdfmill::facets::TileFile;
-use brdfmill::simulate::{self, SimulateConfig, ToolShape};
+use brdfmill::simulate::{self, Shape, SimulateConfig};
 use brdfmill::toolpath::machine::Machine;
 use std::path::PathBuf;
 
@@ -71,7 +71,7 @@ pub fn config(a: &Args) -> Result<SimulateConfig> {
         None => None,
     };
     Ok(SimulateConfig {
-        tool: ToolShape::parse(&a.tool).map_err(|e| anyhow!("--tool: {e}"))?,
+        tool: Shape::parse(&a.tool).map_err(|e| anyhow!("--tool: {e}"))?,
         pitch_um: a.pitch_um,
         bounds_mm: a.bounds.as_deref().map(parse_bounds).transpose()?,
         stock_top_mm: a.stock_top_mm,
@@ -114,17 +114,14 @@ pub fn run(a: &Args) -> Result<()> {
         let tris = simulate::solid(&sim, a.stl_side, 1.0);
         brdfmill::facets::stl::to_binary_stl(&tris, "brdfmill simulated cut")
     });
-    let json = serde_json::to_string_pretty(&serde_json::json!({
-        "format": "brdfmill-sim",
-        "version": 1,
-        "program": a.program.display().to_string(),
-        "npy": "sim.npy",
-        "origin_mm": sim.origin_mm,
-        "config": cfg,
-        "stats": s,
-        "deviation": dev,
-        "design": a.design.as_ref().map(|p| p.display().to_string()),
-    }))?;
+    let json = simulate::SimFile::new(
+        &sim,
+        &cfg,
+        &a.program.display().to_string(),
+        dev.as_ref(),
+        a.design.as_ref().map(|p| p.display().to_string()),
+    )
+    .to_json();
     sim.heightfield.write_npy(&a.out.join("sim.npy"))?;
     brdfmill::io::write_atomic(&a.out.join("sim.png"), &relief)?;
     if let Some(b) = &dev_png {

@@ -16,7 +16,7 @@
 //! centred up to a radius away from it — a position the program can only have visited if it lies within its
 //! extents.
 
-use super::{Simulation, ToolShape};
+use super::{Shape, Simulation};
 use crate::heightfield::Heightfield;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -143,9 +143,9 @@ fn bilinear(v: &[f64], c: [usize; 4], tx: f64, ty: f64) -> f64 {
 
 /// `out(x) = max_{|u| ≤ R} z(x + u) − prof(|u|)` over a grid (the drop-cutter dilation, DESIGN.md §4), rows
 /// in parallel; with `periodic` the grid wraps, otherwise samples beyond it are absent.
-fn dilate(z: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &ToolShape) -> Vec<f64> {
-    let bit = tool.bit();
-    let r = bit.radius();
+fn dilate(z: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &Shape) -> Vec<f64> {
+    let bit = tool.normalized();
+    let r = bit.radius_mm();
     let m = (r / pitch).ceil() as usize + 1;
     let mi = m as i64;
     // offsets (dj, [(di, -prof)])
@@ -203,7 +203,7 @@ fn dilate(z: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &To
 }
 
 /// The opening of a design grid by the bit: erosion of its CL surface (module comment).
-fn opening(h: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &ToolShape) -> Vec<f64> {
+fn opening(h: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &Shape) -> Vec<f64> {
     let cl = dilate(h, nx, ny, pitch, periodic, tool);
     let neg: Vec<f64> = cl.iter().map(|v| -v).collect();
     dilate(&neg, nx, ny, pitch, periodic, tool)
@@ -214,7 +214,7 @@ fn opening(h: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &T
 
 /// Compare a simulation with the design tile (periodic, repeated from the work origin; a non-periodic design
 /// is placed once at the origin and cells beyond it are not assessed). An invalid design assesses nothing.
-pub fn deviation(sim: &Simulation, design: &Heightfield, tool: &ToolShape) -> Deviation {
+pub fn deviation(sim: &Simulation, design: &Heightfield, tool: &Shape) -> Deviation {
     let hf = &sim.heightfield;
     let p = hf.pitch_mm;
     let r = tool.radius_mm();
@@ -468,7 +468,7 @@ mod tests {
                 design.z_mm[j * n + i] = slope * x.abs() - 1.0;
             }
         }
-        let tool = ToolShape::Ball { diameter_mm: 1.0 };
+        let tool = Shape::Ball { diameter_mm: 1.0 };
         let win_open = opening(&design.z_mm, n, n, pd, true, &tool);
         // contact of a ball of radius r on a flank of slope s sits at |x| = r s / sqrt(1 + s²) from the axis
         let half = 0.5 * slope / (1.0 + slope * slope).sqrt();

@@ -29,7 +29,9 @@
 //! distance between a chord and the arc it replaces) is at most `arc_tolerance_mm`: the chords lie inside the
 //! arc, so the swept tool centre is within that tolerance of the programmed one.
 
-use crate::toolpath::moves::{Move, P3};
+use crate::gcode::lex::{g_name as gname, lex, tenths, Block, Word};
+use crate::gcode::modal::{Distance, Modal, MotionMode, Units};
+use crate::gcode::moves::{Move, P3};
 use serde::{Deserialize, Serialize};
 
 /// A program that cannot be simulated: where and why. Line and column count from 1 (columns in characters).
@@ -68,6 +70,10 @@ pub struct Segment {
     /// The program line, from 1.
     pub line: u32,
 }
+
+/// The largest coordinate the reader accepts, mm (1 km): beyond it a number is a typo or an attack, and
+/// the volume and time figures computed from it would be meaningless.
+pub const MAX_COORDINATE_MM: f64 = 1e6;
 
 /// Options of the reader.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -110,115 +116,6 @@ pub struct Program {
     pub end_line: Option<usize>,
     /// The tip's position at the end, mm.
     pub end_mm: P3,
-}
-
-/// One word: letter, value, 0-based column of the letter.
-#[derive(Clone, Copy, Debug)]
-struct Word {
-    letter: char,
-    value: f64,
-    col: usize,
-}
-
-enum LineKind {
-    Words(Vec<Word>),
-    Percent,
-}
-
-fn tokenize(line: &str, lineno: usize) -> Result<LineKind, GcodeError> {
-    let err = |col: usize, message: String| GcodeError {
-        line: lineno,
-        column: col + 1,
-        message,
-    };
-    let c: Vec<char> = line.chars().collect();
-    if line.trim() == "%" {
-        return Ok(LineKind::Percent);
-    }
-    let mut words = vec![];
-    let mut k = 0;
-    while k < c.len() {
-        match c[k] {
-            ' ' | '\t' | '\r' | '\u{feff}' => k += 1,
-            '(' => {
-                let mut e = k + 1;
-                while e < c.len() && c[e] != ')' {
-                    if c[e] == '(' {
-                        return Err(err(e, "nested comment: `(` inside a comment".into()));
-                    }
-                    e += 1;
-                }
-                if e == c.len() {
-                    return Err(err(k, "comment `(` is not closed on this line".into()));
-                }
-                k = e + 1;
-            }
-            ';' => break,
-            '%' => return Err(err(k, "`%` must stand alone on its line".into())),
-            '/' => return Err(err(k, "block delete `/` is not supported".into())),
-            '#' => return Err(err(k, "parameters (`#`) are not supported".into())),
-            '[' => return Err(err(k, "expressions (`[ ]`) are not supported".into())),
-            'o' | 'O' => {
-                return Err(err(
-                    k,
-                    "O-words (subroutines, loops, conditionals) are not supported".into(),
-                ))
-            }
-            l if l.is_ascii_alphabetic() => {
-                let letter = l.to_ascii_uppercase();
-                let col = k;
-                k += 1;
-                let mut num = String::new();
-                let mut digits = 0;
-                let mut dot = false;
-                while k < c.len() {
-                    match c[k] {
-                        ' ' | '\t' => {}
-                        s @ ('+' | '-') if num.is_empty() => num.push(s),
-                        '.' if !dot => {
-                            dot = true;
-                            num.push('.');
-                        }
-                        d if d.is_ascii_digit() => {
-                            digits += 1;
-                            num.push(d);
-                        }
-                        '#' | '[' if digits == 0 => {
-                            return Err(err(
-                                k,
-                                format!("`{letter}` with a parameter or expression: only plain numbers are supported"),
-                            ))
-                        }
-                        _ => break,
-                    }
-                    k += 1;
-                }
-                if digits == 0 {
-                    return Err(err(col, format!("`{letter}` needs a number")));
-                }
-                let value: f64 = num
-                    .parse()
-                    .map_err(|_| err(col, format!("`{letter}{num}` is not a number")))?;
-                words.push(Word { letter, value, col });
-            }
-            ch => return Err(err(k, format!("unexpected character `{ch}`"))),
-        }
-    }
-    Ok(LineKind::Words(words))
-}
-
-/// A G or M code in tenths (`G91.1` → 911), or None when it is not a multiple of 0.1.
-fn tenths(v: f64) -> Option<i64> {
-    let t = (v * 10.0).round();
-    ((v * 10.0 - t).abs() < 1e-6 && v >= 0.0).then_some(t as i64)
-}
-
-fn gname(t: i64) -> String {
-    if t % 10 == 0 {
-        format!("G{}", t / 10)
-    } else {
-        format!("G{}.{}", t / 10, t % 10)
-    }
 }
 
 /// Modal group of a supported G code (tenths), or the reason it is refused.
@@ -269,29 +166,33 @@ fn m_group(m: i64) -> Result<u8, String> {
     })
 }
 
-/// The reader's state between lines.
+/// The reader's state between lines: the crate's one modal state, the position and the tool-change rule.
 struct State {
     pos: P3,
-    inch: bool,
-    incremental: bool,
-    arc_absolute: bool,
-    motion: Option<i64>,
-    feed_mm_min: f64,
-    spindle_rpm: f64,
+    modal: Modal,
     cut_yet: bool,
     tool_changed: bool,
+}
+
+/// A lexed line, or the reader's error for it.
+fn tokenize(raw: &str, lineno: usize) -> Result<Block, GcodeError> {
+    lex(raw).map_err(|e| GcodeError {
+        line: lineno,
+        column: e.column + 1,
+        message: e.kind.to_string(),
+    })
 }
 
 /// Read a whole program.
 pub fn parse(text: &str, opt: &ParseOptions) -> Result<Program, GcodeError> {
     let mut st = State {
         pos: opt.start_mm,
-        inch: false,
-        incremental: false,
-        arc_absolute: false,
-        motion: None,
-        feed_mm_min: 0.0,
-        spindle_rpm: 0.0,
+        // LinuxCNC's standalone interpreter starts with no motion mode: coordinates before a G0/G1/G2/G3
+        // are an error, not a rapid.
+        modal: Modal {
+            motion: MotionMode::Cancel,
+            ..Modal::default()
+        },
         cut_yet: false,
         tool_changed: false,
     };
@@ -302,14 +203,14 @@ pub fn parse(text: &str, opt: &ParseOptions) -> Result<Program, GcodeError> {
         let lineno = n + 1;
         prog.lines = lineno;
         match tokenize(raw, lineno)? {
-            LineKind::Percent => {
+            Block::Percent => {
                 percents += 1;
                 if percents == 2 || seen_content {
                     prog.end_line = Some(lineno);
                     break;
                 }
             }
-            LineKind::Words(w) => {
+            Block::Words(w) => {
                 if w.is_empty() {
                     continue;
                 }
@@ -332,6 +233,101 @@ pub fn parse(text: &str, opt: &ParseOptions) -> Result<Program, GcodeError> {
     Ok(prog)
 }
 
+/// The words of one block, sorted by kind, each with its 0-based column.
+struct Words {
+    /// G codes in tenths.
+    gs: Vec<(i64, usize)>,
+    /// M codes.
+    ms: Vec<(i64, usize)>,
+    /// Value words by letter (`A` = 0).
+    val: [Option<(f64, usize)>; 26],
+}
+
+impl Words {
+    fn get(&self, l: char) -> Option<(f64, usize)> {
+        self.val[(l as u8 - b'A') as usize]
+    }
+    fn has_g(&self, t: i64) -> bool {
+        self.gs.iter().any(|g| g.0 == t)
+    }
+    fn has_m(&self, m: i64) -> bool {
+        self.ms.iter().any(|g| g.0 == m)
+    }
+}
+
+/// An error at a 0-based column of line `lineno`.
+fn at(lineno: usize, col: usize, message: String) -> GcodeError {
+    GcodeError {
+        line: lineno,
+        column: col + 1,
+        message,
+    }
+}
+
+/// Sort a block's words, refusing unknown codes, two codes of one modal group and repeated letters.
+fn sort_words(w: &[Word], lineno: usize) -> Result<Words, GcodeError> {
+    let err = |col: usize, message: String| at(lineno, col, message);
+    let mut out = Words {
+        gs: vec![],
+        ms: vec![],
+        val: [None; 26],
+    };
+    let mut g_groups: Vec<u8> = vec![];
+    let mut m_groups: Vec<u8> = vec![];
+    for (k, wd) in w.iter().enumerate() {
+        match wd.letter {
+            'G' => {
+                let t = tenths(wd.value).ok_or_else(|| err(wd.column, format!("G{} is not supported", wd.value)))?;
+                let g = g_group(t).map_err(|m| err(wd.column, m))?;
+                if g != 0 && g_groups.contains(&g) {
+                    return Err(err(
+                        wd.column,
+                        format!("{} conflicts with another G code of its group on this line", gname(t)),
+                    ));
+                }
+                g_groups.push(g);
+                out.gs.push((t, wd.column));
+            }
+            'M' => {
+                let m = match tenths(wd.value) {
+                    Some(t) if t % 10 == 0 => t / 10,
+                    _ => return Err(err(wd.column, format!("M{} is not supported", wd.value))),
+                };
+                let g = m_group(m).map_err(|e| err(wd.column, e))?;
+                if g != 8 && m_groups.contains(&g) {
+                    return Err(err(
+                        wd.column,
+                        format!("M{m} conflicts with another M code of its group on this line"),
+                    ));
+                }
+                m_groups.push(g);
+                out.ms.push((m, wd.column));
+            }
+            'N' => {
+                if k != 0 {
+                    return Err(err(wd.column, "a line number `N` must come first on the line".into()));
+                }
+            }
+            'X' | 'Y' | 'Z' | 'I' | 'J' | 'R' | 'F' | 'S' | 'P' | 'Q' | 'T' => {
+                let slot = &mut out.val[(wd.letter as u8 - b'A') as usize];
+                if slot.is_some() {
+                    return Err(err(wd.column, format!("`{}` appears twice on this line", wd.letter)));
+                }
+                *slot = Some((wd.value, wd.column));
+            }
+            'K' => return Err(err(wd.column, "`K` is not used by G17 arcs (XY plane only)".into())),
+            'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
+                return Err(err(
+                    wd.column,
+                    format!("axis `{}`: only X, Y and Z are simulated (3-axis)", wd.letter),
+                ))
+            }
+            l => return Err(err(wd.column, format!("word `{l}` is not supported"))),
+        }
+    }
+    Ok(out)
+}
+
 /// Execute one block in the order of RS274/NGC (F, S, T, M6, spindle, coolant, dwell, modes, motion, stop).
 /// Returns true when the block ends the program.
 fn block(
@@ -341,95 +337,39 @@ fn block(
     prog: &mut Program,
     opt: &ParseOptions,
 ) -> Result<bool, GcodeError> {
-    let err = |col: usize, message: String| GcodeError {
-        line: lineno,
-        column: col + 1,
-        message,
-    };
-    let mut gs: Vec<(i64, usize)> = vec![];
-    let mut ms: Vec<(i64, usize)> = vec![];
-    let mut val: [Option<(f64, usize)>; 26] = [None; 26];
-    let mut g_groups: Vec<u8> = vec![];
-    let mut m_groups: Vec<u8> = vec![];
-    for (k, wd) in w.iter().enumerate() {
-        match wd.letter {
-            'G' => {
-                let t = tenths(wd.value).ok_or_else(|| err(wd.col, format!("G{} is not supported", wd.value)))?;
-                let g = g_group(t).map_err(|m| err(wd.col, m))?;
-                if g != 0 && g_groups.contains(&g) {
-                    return Err(err(
-                        wd.col,
-                        format!("{} conflicts with another G code of its group on this line", gname(t)),
-                    ));
-                }
-                g_groups.push(g);
-                gs.push((t, wd.col));
-            }
-            'M' => {
-                let m = match tenths(wd.value) {
-                    Some(t) if t % 10 == 0 => t / 10,
-                    _ => return Err(err(wd.col, format!("M{} is not supported", wd.value))),
-                };
-                let g = m_group(m).map_err(|e| err(wd.col, e))?;
-                if g != 8 && m_groups.contains(&g) {
-                    return Err(err(
-                        wd.col,
-                        format!("M{m} conflicts with another M code of its group on this line"),
-                    ));
-                }
-                m_groups.push(g);
-                ms.push((m, wd.col));
-            }
-            'N' => {
-                if k != 0 {
-                    return Err(err(wd.col, "a line number `N` must come first on the line".into()));
-                }
-            }
-            'X' | 'Y' | 'Z' | 'I' | 'J' | 'R' | 'F' | 'S' | 'P' | 'Q' | 'T' => {
-                let slot = &mut val[(wd.letter as u8 - b'A') as usize];
-                if slot.is_some() {
-                    return Err(err(wd.col, format!("`{}` appears twice on this line", wd.letter)));
-                }
-                *slot = Some((wd.value, wd.col));
-            }
-            'K' => return Err(err(wd.col, "`K` is not used by G17 arcs (XY plane only)".into())),
-            'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
-                return Err(err(
-                    wd.col,
-                    format!("axis `{}`: only X, Y and Z are simulated (3-axis)", wd.letter),
-                ))
-            }
-            l => return Err(err(wd.col, format!("word `{l}` is not supported"))),
-        }
-    }
-    let get = |l: char| val[(l as u8 - b'A') as usize];
-    let has_g = |t: i64| gs.iter().any(|g| g.0 == t);
-    let has_m = |m: i64| ms.iter().any(|g| g.0 == m);
-    let unit = |inch: bool| if inch { 25.4 } else { 1.0 };
+    let w = sort_words(w, lineno)?;
+    feeds_and_tools(&w, lineno, st, prog)?;
+    dwell(&w, lineno, st, prog)?;
+    modes(&w, st, prog);
+    motion(&w, lineno, st, prog, opt)?;
+    Ok(w.has_m(2) || w.has_m(30))
+}
 
-    // F, S, T
-    if let Some((f, col)) = get('F') {
+/// F, S, T and M6, spindle on/off.
+fn feeds_and_tools(w: &Words, lineno: usize, st: &mut State, prog: &mut Program) -> Result<(), GcodeError> {
+    let err = |col: usize, message: String| at(lineno, col, message);
+    if let Some((f, col)) = w.get('F') {
         if f < 0.0 {
             return Err(err(col, format!("negative feed F{f}")));
         }
         // units are those in force when F is read; a G20/G21 on the same line applies first
-        let inch = if has_g(200) {
-            true
-        } else if has_g(210) {
-            false
+        let units = if w.has_g(200) {
+            Units::Inch
+        } else if w.has_g(210) {
+            Units::Mm
         } else {
-            st.inch
+            st.modal.units
         };
-        st.feed_mm_min = f * unit(inch);
+        st.modal.feed_mm_min = Some(f * units.mm());
     }
-    if let Some((s, col)) = get('S') {
+    if let Some((s, col)) = w.get('S') {
         if s < 0.0 {
             return Err(err(col, format!("negative spindle speed S{s}")));
         }
-        st.spindle_rpm = s;
+        st.modal.spindle_rpm = s;
     }
     // M6: one tool for the whole simulation
-    if let Some(&(_, col)) = ms.iter().find(|m| m.0 == 6) {
+    if let Some(&(_, col)) = w.ms.iter().find(|m| m.0 == 6) {
         if st.cut_yet || st.tool_changed {
             return Err(err(
                 col,
@@ -439,37 +379,39 @@ fn block(
         }
         st.tool_changed = true;
     }
-    if has_m(3) || has_m(4) {
-        prog.moves.push(Move::SpindleOn(st.spindle_rpm));
+    if w.has_m(3) || w.has_m(4) {
+        prog.moves.push(Move::SpindleOn(st.modal.spindle_rpm));
     }
-    if has_m(5) {
+    if w.has_m(5) {
         prog.moves.push(Move::SpindleOff);
     }
-    // P and Q belong to G4, G64 or an arc
-    let arc_here = matches!(
-        gs.iter()
-            .find(|g| matches!(g.0, 0 | 10 | 20 | 30 | 800))
-            .map(|g| g.0)
-            .or(st.motion),
-        Some(20 | 30)
-    );
-    if let Some((_, col)) = get('P') {
-        if !(has_g(40) || has_g(640) || arc_here) {
+    Ok(())
+}
+
+/// `P` and `Q` belong to G4, G64 or an arc; G4 dwells.
+fn dwell(w: &Words, lineno: usize, st: &State, prog: &mut Program) -> Result<(), GcodeError> {
+    let err = |col: usize, message: String| at(lineno, col, message);
+    let motion_here =
+        w.gs.iter()
+            .find_map(|g| MotionMode::from_tenths(g.0))
+            .unwrap_or(st.modal.motion);
+    if let Some((_, col)) = w.get('P') {
+        if !(w.has_g(40) || w.has_g(640) || motion_here.is_arc()) {
             return Err(err(
                 col,
                 "`P` is only understood with G4 (dwell), G64 or an arc (turns)".into(),
             ));
         }
     }
-    if let Some((_, col)) = get('Q') {
-        if !has_g(640) {
+    if let Some((_, col)) = w.get('Q') {
+        if !w.has_g(640) {
             return Err(err(col, "`Q` is only understood with G64".into()));
         }
     }
-    if has_g(40) {
-        let (p, col) = get('P').ok_or_else(|| {
+    if w.has_g(40) {
+        let (p, col) = w.get('P').ok_or_else(|| {
             err(
-                gs.iter().find(|g| g.0 == 40).map_or(0, |g| g.1),
+                w.gs.iter().find(|g| g.0 == 40).map_or(0, |g| g.1),
                 "G4 needs `P` (seconds)".into(),
             )
         })?;
@@ -478,90 +420,107 @@ fn block(
         }
         prog.moves.push(Move::Dwell(p));
     }
-    // modes
-    if has_g(200) {
-        st.inch = true;
-        prog.inch = true;
+    Ok(())
+}
+
+/// Units and distance modes.
+fn modes(w: &Words, st: &mut State, prog: &mut Program) {
+    let m = &mut st.modal;
+    for &(t, _) in &w.gs {
+        match t {
+            200 => {
+                m.units = Units::Inch;
+                prog.inch = true;
+            }
+            210 => m.units = Units::Mm,
+            900 => m.distance = Distance::Absolute,
+            910 => m.distance = Distance::Incremental,
+            901 => m.arc_distance = Distance::Absolute,
+            911 => m.arc_distance = Distance::Incremental,
+            _ => {}
+        }
     }
-    if has_g(210) {
-        st.inch = false;
-    }
-    if has_g(900) {
-        st.incremental = false;
-    }
-    if has_g(910) {
-        st.incremental = true;
-    }
-    if has_g(901) {
-        st.arc_absolute = true;
-    }
-    if has_g(911) {
-        st.arc_absolute = false;
-    }
+}
+
+/// The block's motion, if it has coordinates.
+fn motion(w: &Words, lineno: usize, st: &mut State, prog: &mut Program, opt: &ParseOptions) -> Result<(), GcodeError> {
+    let err = |col: usize, message: String| at(lineno, col, message);
     let mut motion_col = None;
-    for &(t, col) in &gs {
-        if matches!(t, 0 | 10 | 20 | 30) {
-            st.motion = Some(t);
-            motion_col = Some(col);
-        } else if t == 800 {
-            st.motion = None;
+    for &(t, col) in &w.gs {
+        if let Some(m) = MotionMode::from_tenths(t) {
+            st.modal.motion = m;
             motion_col = Some(col);
         }
     }
-    // motion
-    let axis_col = ['X', 'Y', 'Z'].iter().filter_map(|l| get(*l).map(|v| v.1)).min();
-    let arc_col = ['I', 'J', 'R'].iter().filter_map(|l| get(*l).map(|v| v.1)).min();
-    if axis_col.is_some() || arc_col.is_some() {
-        let col = motion_col.or(axis_col).or(arc_col).unwrap_or(0);
-        let Some(motion) = st.motion else {
-            return Err(err(
-                axis_col.or(arc_col).unwrap_or(0),
-                "coordinates without an active motion mode (G0/G1/G2/G3)".into(),
-            ));
-        };
-        if !matches!(motion, 20 | 30) {
-            if let Some(c) = arc_col {
-                return Err(err(c, "`I`, `J` or `R` without an arc (G2/G3)".into()));
-            }
-        }
-        let u = unit(st.inch);
-        let mut target = st.pos;
-        for (k, l) in ['X', 'Y', 'Z'].iter().enumerate() {
-            if let Some((v, _)) = get(*l) {
-                target[k] = if st.incremental { st.pos[k] + v * u } else { v * u };
-            }
-        }
-        if motion != 0 && st.feed_mm_min <= 0.0 {
-            return Err(err(col, format!("{} without a feed rate (F)", gname(motion))));
-        }
-        let from = st.pos;
-        let before = prog.segments.len();
-        match motion {
-            0 => push_line(prog, from, target, SegmentKind::Rapid, lineno, None),
-            10 => push_line(prog, from, target, SegmentKind::Feed, lineno, Some(st.feed_mm_min)),
-            _ => {
-                arc(prog, st, &get, target, motion == 20, lineno, col, opt).map_err(|m| err(m.0, m.1))?;
-                prog.arcs += 1;
-            }
-        }
-        if prog.segments.len() > before {
-            prog.motions += 1;
-            if motion != 0 {
-                st.cut_yet = true;
-            }
-        }
-        if prog.segments.len() > opt.max_segments {
-            return Err(err(
-                col,
-                format!(
-                    "the program expands to more than {} linear segments (arcs are split within the arc tolerance)",
-                    opt.max_segments
-                ),
-            ));
-        }
-        st.pos = target;
+    let axis_col = ['X', 'Y', 'Z'].iter().filter_map(|l| w.get(*l).map(|v| v.1)).min();
+    let arc_col = ['I', 'J', 'R'].iter().filter_map(|l| w.get(*l).map(|v| v.1)).min();
+    if axis_col.is_none() && arc_col.is_none() {
+        return Ok(());
     }
-    Ok(has_m(2) || has_m(30))
+    let col = motion_col.or(axis_col).or(arc_col).unwrap_or(0);
+    let motion = st.modal.motion;
+    if motion == MotionMode::Cancel {
+        return Err(err(
+            axis_col.or(arc_col).unwrap_or(0),
+            "coordinates without an active motion mode (G0/G1/G2/G3)".into(),
+        ));
+    }
+    if !motion.is_arc() {
+        if let Some(c) = arc_col {
+            return Err(err(c, "`I`, `J` or `R` without an arc (G2/G3)".into()));
+        }
+    }
+    let u = st.modal.units.mm();
+    let mut target = st.pos;
+    for (k, l) in ['X', 'Y', 'Z'].iter().enumerate() {
+        if let Some((v, c)) = w.get(*l) {
+            target[k] = match st.modal.distance {
+                Distance::Incremental => st.pos[k] + v * u,
+                Distance::Absolute => v * u,
+            };
+            if !target[k].is_finite() || target[k].abs() > MAX_COORDINATE_MM {
+                return Err(err(
+                    c,
+                    format!(
+                        "{l} reaches {:e} mm, beyond any machine (|coordinate| ≤ {MAX_COORDINATE_MM:e} mm)",
+                        target[k]
+                    ),
+                ));
+            }
+        }
+    }
+    let feed = st.modal.feed_mm_min.unwrap_or(0.0);
+    if motion != MotionMode::Rapid && feed <= 0.0 {
+        return Err(err(col, format!("{} without a feed rate (F)", motion.name())));
+    }
+    let from = st.pos;
+    let before = prog.segments.len();
+    match motion {
+        MotionMode::Rapid => push_line(prog, from, target, SegmentKind::Rapid, lineno, None),
+        MotionMode::Linear => push_line(prog, from, target, SegmentKind::Feed, lineno, Some(feed)),
+        _ => {
+            let get = |l: char| w.get(l);
+            arc(prog, st, &get, target, motion == MotionMode::ArcCw, lineno, col, opt).map_err(|m| err(m.0, m.1))?;
+            prog.arcs += 1;
+        }
+    }
+    if prog.segments.len() > before {
+        prog.motions += 1;
+        if motion != MotionMode::Rapid {
+            st.cut_yet = true;
+        }
+    }
+    if prog.segments.len() > opt.max_segments {
+        return Err(err(
+            col,
+            format!(
+                "the program expands to more than {} linear segments (arcs are split within the arc tolerance)",
+                opt.max_segments
+            ),
+        ));
+    }
+    st.pos = target;
+    Ok(())
 }
 
 fn push_line(prog: &mut Program, from: P3, to: P3, kind: SegmentKind, line: usize, feed: Option<f64>) {
@@ -595,7 +554,7 @@ fn arc(
     opt: &ParseOptions,
 ) -> Result<(), (usize, String)> {
     use std::f64::consts::TAU;
-    let u = if st.inch { 25.4 } else { 1.0 };
+    let u = st.modal.units.mm();
     let [x0, y0, z0] = st.pos;
     let [x1, y1, z1] = target;
     let turns = match get('P') {
@@ -635,7 +594,10 @@ fn arc(
         (None, Some(_)) => {
             let i = get('I').map_or(0.0, |v| v.0) * u;
             let j = get('J').map_or(0.0, |v| v.0) * u;
-            let (cx, cy) = if st.arc_absolute { (i, j) } else { (x0 + i, y0 + j) };
+            let (cx, cy) = match st.modal.arc_distance {
+                Distance::Absolute => (i, j),
+                Distance::Incremental => (x0 + i, y0 + j),
+            };
             let r0 = ((x0 - cx).powi(2) + (y0 - cy).powi(2)).sqrt();
             let r1 = ((x1 - cx).powi(2) + (y1 - cy).powi(2)).sqrt();
             if r0 < 1e-9 {
@@ -687,7 +649,7 @@ fn arc(
             let rr = r0 + (r1 - r0) * f;
             [cx + rr * a.cos(), cy + rr * a.sin(), z0 + (z1 - z0) * f]
         };
-        push_line(prog, at, p, SegmentKind::Arc, lineno, Some(st.feed_mm_min));
+        push_line(prog, at, p, SegmentKind::Arc, lineno, st.modal.feed_mm_min);
         at = p;
     }
     Ok(())

@@ -16,8 +16,8 @@
 //!
 //! # Example
 //! ```
-//! use brdfmill::simulate::{self, SimulateConfig, ToolShape};
-//! let cfg = SimulateConfig { tool: ToolShape::parse("ball:1.0").unwrap(), pitch_um: 10.0, ..Default::default() };
+//! use brdfmill::simulate::{self, SimulateConfig, Shape};
+//! let cfg = SimulateConfig { tool: Shape::parse("ball:1.0").unwrap(), pitch_um: 10.0, ..Default::default() };
 //! let sim = simulate::run("G21 G90\nG0 X0 Y0.005 Z1\nG1 Z-0.2 F100\nX2\nG0 Z1\nM2\n", &cfg).unwrap();
 //! // a 0.2 mm deep groove of a 1 mm ball (along a row of cell centres)
 //! let (lo, _) = sim.heightfield.range();
@@ -31,136 +31,19 @@ pub mod sweep;
 
 pub use deviation::{deviation, Deviation};
 
+use crate::gcode::moves::P3;
 use crate::heightfield::Heightfield;
+pub use crate::tool::Shape;
 use crate::toolpath::machine::Machine;
-use crate::toolpath::moves::P3;
 use gcode::{ParseOptions, Program};
 use serde::{Deserialize, Serialize};
-use sweep::Bit;
-
-/// The bit's shape. Diameters and radii in mm.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ToolShape {
-    /// Ball-nose end mill.
-    Ball {
-        /// Diameter, mm.
-        diameter_mm: f64,
-    },
-    /// Flat end mill.
-    Flat {
-        /// Diameter, mm.
-        diameter_mm: f64,
-    },
-    /// Bull-nose end mill: a flat end with rounded corners.
-    Bull {
-        /// Diameter, mm.
-        diameter_mm: f64,
-        /// Corner radius, mm (at most half the diameter; half the diameter is a ball).
-        corner_radius_mm: f64,
-    },
-}
-
-impl Default for ToolShape {
-    fn default() -> Self {
-        ToolShape::Ball { diameter_mm: 1.0 }
-    }
-}
-
-impl ToolShape {
-    /// Parse `ball:D`, `flat:D` or `bull:D:R` (diameter and corner radius in mm).
-    pub fn parse(s: &str) -> Result<Self, String> {
-        let parts: Vec<&str> = s.split(':').map(str::trim).collect();
-        let num = |k: usize, what: &str| -> Result<f64, String> {
-            let t = parts.get(k).ok_or_else(|| format!("tool `{s}`: missing the {what}"))?;
-            t.parse::<f64>()
-                .map_err(|_| format!("tool `{s}`: the {what} `{t}` is not a number"))
-        };
-        let shape = match (parts[0].to_ascii_lowercase().as_str(), parts.len()) {
-            ("ball", 2) => ToolShape::Ball {
-                diameter_mm: num(1, "diameter (mm)")?,
-            },
-            ("flat", 2) => ToolShape::Flat {
-                diameter_mm: num(1, "diameter (mm)")?,
-            },
-            ("bull", 3) => ToolShape::Bull {
-                diameter_mm: num(1, "diameter (mm)")?,
-                corner_radius_mm: num(2, "corner radius (mm)")?,
-            },
-            _ => return Err(format!("tool `{s}`: expected ball:D, flat:D or bull:D:R (mm)")),
-        };
-        shape.validate()?;
-        Ok(shape)
-    }
-
-    /// Check the dimensions; the error names the field.
-    pub fn validate(&self) -> Result<(), String> {
-        let d = self.diameter_mm();
-        if !(d.is_finite() && d > 0.0) {
-            return Err(format!("tool diameter_mm must be positive, got {d}"));
-        }
-        if let ToolShape::Bull {
-            corner_radius_mm: rc, ..
-        } = *self
-        {
-            if !(rc.is_finite() && rc > 0.0 && rc <= d / 2.0) {
-                return Err(format!(
-                    "bull-nose corner_radius_mm must be in (0, diameter/2 = {}], got {rc}",
-                    d / 2.0
-                ));
-            }
-        }
-        Ok(())
-    }
-
-    /// Diameter, mm.
-    pub fn diameter_mm(&self) -> f64 {
-        match *self {
-            ToolShape::Ball { diameter_mm } | ToolShape::Flat { diameter_mm } | ToolShape::Bull { diameter_mm, .. } => {
-                diameter_mm
-            }
-        }
-    }
-
-    /// Radius, mm.
-    pub fn radius_mm(&self) -> f64 {
-        self.diameter_mm() / 2.0
-    }
-
-    /// The shape as the sweep sees it (a bull whose corner is half the diameter is a ball).
-    pub fn bit(&self) -> Bit {
-        let r = self.radius_mm();
-        match *self {
-            ToolShape::Ball { .. } => Bit::Ball { r },
-            ToolShape::Flat { .. } => Bit::Flat { r },
-            ToolShape::Bull { corner_radius_mm, .. } if corner_radius_mm >= r => Bit::Ball { r },
-            ToolShape::Bull { corner_radius_mm, .. } => Bit::Bull {
-                r,
-                rc: corner_radius_mm,
-            },
-        }
-    }
-}
-
-impl std::fmt::Display for ToolShape {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match *self {
-            ToolShape::Ball { diameter_mm } => write!(f, "ball:{diameter_mm}"),
-            ToolShape::Flat { diameter_mm } => write!(f, "flat:{diameter_mm}"),
-            ToolShape::Bull {
-                diameter_mm,
-                corner_radius_mm,
-            } => write!(f, "bull:{diameter_mm}:{corner_radius_mm}"),
-        }
-    }
-}
 
 /// Configuration of the simulation. Lengths carry their unit in the name.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SimulateConfig {
     /// The bit.
-    pub tool: ToolShape,
+    pub tool: Shape,
     /// Stock grid pitch, µm.
     pub pitch_um: f64,
     /// Stock bounds `[x0, y0, x1, y1]`, mm; None: the XY extents of the moves that reach below the stock top
@@ -187,7 +70,7 @@ pub struct SimulateConfig {
 impl Default for SimulateConfig {
     fn default() -> Self {
         Self {
-            tool: ToolShape::default(),
+            tool: Shape::default(),
             pitch_um: 5.0,
             bounds_mm: None,
             stock_top_mm: 0.0,
@@ -205,7 +88,9 @@ impl SimulateConfig {
     /// Check every field; the error names it.
     pub fn validate(&self) -> Result<(), SimulateError> {
         let bad = |s: String| Err(SimulateError::Config(s));
-        self.tool.validate().map_err(SimulateError::Config)?;
+        self.tool
+            .validate()
+            .map_err(|e| SimulateError::Config(format!("tool {e}")))?;
         let p = self.pitch_um;
         if !(p.is_finite() && p > 0.0) {
             return bad(format!("pitch_um must be positive, got {p}"));
@@ -319,6 +204,58 @@ impl Simulation {
     }
 }
 
+/// `sim.json`, version 1: the one layout that `brdfmill simulate` and `brdfmill run` both write.
+#[derive(Debug, Serialize)]
+pub struct SimFile<'a> {
+    /// `"brdfmill-sim"`.
+    pub format: &'static str,
+    /// 1.
+    pub version: u32,
+    /// The program simulated (its path as given).
+    pub program: String,
+    /// The heights file beside this one.
+    pub npy: &'static str,
+    /// Work x, y of the grid's lower-left corner, mm.
+    pub origin_mm: [f64; 2],
+    /// The configuration.
+    pub config: &'a SimulateConfig,
+    /// The numbers.
+    pub stats: &'a SimStats,
+    /// Deviation from the design, when one was given.
+    pub deviation: Option<&'a Deviation>,
+    /// The design compared against (its path as given).
+    pub design: Option<String>,
+}
+
+impl<'a> SimFile<'a> {
+    /// The file for a simulation of `program` (a path, for the record) under `config`.
+    pub fn new(
+        sim: &'a Simulation,
+        config: &'a SimulateConfig,
+        program: &str,
+        deviation: Option<&'a Deviation>,
+        design: Option<String>,
+    ) -> Self {
+        SimFile {
+            format: "brdfmill-sim",
+            version: 1,
+            program: program.to_string(),
+            npy: "sim.npy",
+            origin_mm: sim.origin_mm,
+            config,
+            stats: &sim.stats,
+            deviation,
+            design,
+        }
+    }
+
+    /// Pretty JSON.
+    #[must_use]
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("sim.json holds only finite numbers and strings")
+    }
+}
+
 /// The limits assumed when no machine profile is given.
 pub fn default_machine() -> Option<Machine> {
     Machine::parse(include_str!("../../machines/linuxcnc-mill.toml")).ok()
@@ -417,7 +354,7 @@ pub fn simulate(prog: &Program, cfg: &SimulateConfig) -> Result<Simulation, Simu
     }
     let grid = stock_grid(prog, cfg)?;
     let top = cfg.stock_top_mm;
-    let (z, rep) = stock::sweep(&grid, top, cfg.tool.bit(), &prog.segments);
+    let (z, rep) = stock::sweep(&grid, top, cfg.tool, &prog.segments);
     let area = grid.pitch * grid.pitch;
     let removed: f64 = z.iter().map(|v| (top - v).max(0.0)).sum::<f64>() * area;
     let min_z = z.iter().copied().fold(f64::INFINITY, f64::min);
@@ -433,7 +370,7 @@ pub fn simulate(prog: &Program, cfg: &SimulateConfig) -> Result<Simulation, Simu
         ),
         None => (f64::NAN, "none".into()),
     };
-    let len = crate::toolpath::moves::lengths(&prog.moves, cfg.start_mm);
+    let len = crate::gcode::moves::lengths(&prog.moves, cfg.start_mm);
     let stats = SimStats {
         removed_volume_mm3: removed,
         estimated_s,
@@ -538,26 +475,20 @@ mod tests {
 
     #[test]
     fn tool_specs() {
+        assert_eq!(Shape::parse("ball:1.0").unwrap(), Shape::Ball { diameter_mm: 1.0 });
+        assert_eq!(Shape::parse("flat:3").unwrap(), Shape::Flat { diameter_mm: 3.0 });
         assert_eq!(
-            ToolShape::parse("ball:1.0").unwrap(),
-            ToolShape::Ball { diameter_mm: 1.0 }
-        );
-        assert_eq!(
-            ToolShape::parse("flat:3").unwrap(),
-            ToolShape::Flat { diameter_mm: 3.0 }
-        );
-        assert_eq!(
-            ToolShape::parse("bull:6:0.5").unwrap(),
-            ToolShape::Bull {
+            Shape::parse("bull:6:0.5").unwrap(),
+            Shape::Bull {
                 diameter_mm: 6.0,
                 corner_radius_mm: 0.5
             }
         );
         for bad in ["ball", "ball:x", "ball:-1", "bull:2:1.5", "cone:1", "flat:1:2", ""] {
-            assert!(ToolShape::parse(bad).is_err(), "{bad}");
+            assert!(Shape::parse(bad).is_err(), "{bad}");
         }
-        let t = ToolShape::parse("bull:6:0.5").unwrap();
-        assert_eq!(ToolShape::parse(&t.to_string()).unwrap(), t);
+        let t = Shape::parse("bull:6:0.5").unwrap();
+        assert_eq!(Shape::parse(&t.to_string()).unwrap(), t);
     }
 
     #[test]

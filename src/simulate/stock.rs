@@ -6,7 +6,8 @@
 //! result does not depend on the schedule.
 
 use super::gcode::{Segment, SegmentKind};
-use super::sweep::{Bit, Sweep};
+use super::sweep::Sweep;
+use crate::tool::Shape;
 use rayon::prelude::*;
 
 /// Side of a tile, cells.
@@ -43,7 +44,7 @@ pub struct SweepReport {
 }
 
 /// Sweep `segs` with `bit` over a stock flat at `top`; returns the heights row-major (`nx × ny`) and a report.
-pub fn sweep(grid: &Grid, top: f64, bit: Bit, segs: &[Segment]) -> (Vec<f64>, SweepReport) {
+pub fn sweep(grid: &Grid, top: f64, bit: Shape, segs: &[Segment]) -> (Vec<f64>, SweepReport) {
     let (tx, ty) = (grid.nx.div_ceil(TILE), grid.ny.div_ceil(TILE));
     let mut bins: Vec<Vec<u32>> = vec![vec![]; tx * ty];
     let mut sweeps: Vec<Sweep> = Vec::with_capacity(segs.len());
@@ -186,9 +187,12 @@ mod tests {
             })
             .collect();
         for bit in [
-            Bit::Ball { r: 0.3 },
-            Bit::Flat { r: 0.2 },
-            Bit::Bull { r: 0.25, rc: 0.1 },
+            Shape::Ball { diameter_mm: 0.6 },
+            Shape::Flat { diameter_mm: 0.4 },
+            Shape::Bull {
+                diameter_mm: 0.5,
+                corner_radius_mm: 0.1,
+            },
         ] {
             let (z, rep) = sweep(&grid, 0.0, bit, &segs);
             let sweeps: Vec<Sweep> = segs.iter().map(|s| Sweep::new(bit, s.from, s.to)).collect();

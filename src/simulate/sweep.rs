@@ -26,7 +26,8 @@
 //! A segment whose horizontal length is below [`VERTICAL_MM`] is taken as vertical (a plunge or a retract):
 //! the lowest point is then the lower end's.
 
-use crate::toolpath::moves::P3;
+use crate::gcode::moves::P3;
+use crate::tool::Shape;
 
 /// Horizontal length below which a segment counts as vertical, mm (0.1 nm).
 pub const VERTICAL_MM: f64 = 1e-7;
@@ -38,77 +39,10 @@ pub const BULL_TOLERANCE_MM: f64 = 1e-9;
 /// (1 nm): a retract from the bottom of a cut re-sweeps the end sphere the cut already left, up to rounding.
 pub const LOWERED_MM: f64 = 1e-6;
 
-/// The bit as the sweep sees it.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Bit {
-    /// Ball of radius `r`, mm.
-    Ball {
-        /// Radius, mm.
-        r: f64,
-    },
-    /// Flat end of radius `r`, mm.
-    Flat {
-        /// Radius, mm.
-        r: f64,
-    },
-    /// Flat of radius `r − rc` with a corner of radius `rc`, mm.
-    Bull {
-        /// Radius, mm.
-        r: f64,
-        /// Corner radius, mm.
-        rc: f64,
-    },
-}
-
-impl Bit {
-    /// Outer radius, mm.
-    pub fn radius(&self) -> f64 {
-        match *self {
-            Bit::Ball { r } | Bit::Flat { r } | Bit::Bull { r, .. } => r,
-        }
-    }
-
-    /// Height of the underside above the tip at horizontal distance `rho` (≤ radius), mm.
-    #[inline]
-    pub fn profile(&self, rho: f64) -> f64 {
-        match *self {
-            Bit::Ball { r } => r - (r * r - rho * rho).max(0.0).sqrt(),
-            Bit::Flat { .. } => 0.0,
-            Bit::Bull { r, rc } => {
-                let s = rho - (r - rc);
-                if s <= 0.0 {
-                    0.0
-                } else {
-                    rc - (rc * rc - s * s).max(0.0).sqrt()
-                }
-            }
-        }
-    }
-
-    /// d profile / d rho.
-    #[inline]
-    fn profile_slope(&self, rho: f64) -> f64 {
-        let (s, rc) = match *self {
-            Bit::Ball { r } => (rho, r),
-            Bit::Flat { .. } => return 0.0,
-            Bit::Bull { r, rc } => (rho - (r - rc), rc),
-        };
-        if s <= 0.0 {
-            return 0.0;
-        }
-        let d = rc * rc - s * s;
-        if d <= 0.0 {
-            f64::INFINITY
-        } else {
-            s / d.sqrt()
-        }
-    }
-}
-
 /// One segment prepared for sweeping: endpoints ordered so that `dz ≥ 0`, constants of the closed forms.
 #[derive(Clone, Copy, Debug)]
 pub struct Sweep {
-    bit: Bit,
+    bit: Shape,
     ax: f64,
     ay: f64,
     az: f64,
@@ -127,7 +61,7 @@ pub struct Sweep {
 
 impl Sweep {
     /// Prepare the sweep of `bit` with its tip from `a` to `b` (mm).
-    pub fn new(bit: Bit, a: P3, b: P3) -> Self {
+    pub fn new(bit: Shape, a: P3, b: P3) -> Self {
         // The swept solid does not depend on the direction of travel: order so that z rises.
         let (a, b) = if b[2] < a[2] { (b, a) } else { (a, b) };
         let (mut dx, mut dy, dz) = (b[0] - a[0], b[1] - a[1], b[2] - a[2]);
@@ -141,7 +75,7 @@ impl Sweep {
         } else {
             (0.0, 0.0, 0.0)
         };
-        let r = bit.radius();
+        let r = bit.radius_mm();
         Self {
             bit,
             ax: a[0],
@@ -254,7 +188,7 @@ impl Sweep {
         let mut hits = 0;
         let mut lowered = false;
         match self.bit {
-            Bit::Ball { .. } => {
+            Shape::Ball { .. } => {
                 for (i, cell) in row.iter_mut().enumerate() {
                     let ex = ex0 + i as f64 * pitch;
                     let ed = ex * dx + eyd;
@@ -273,7 +207,7 @@ impl Sweep {
                     }
                 }
             }
-            Bit::Flat { .. } => {
+            Shape::Flat { .. } => {
                 for (i, cell) in row.iter_mut().enumerate() {
                     let ex = ex0 + i as f64 * pitch;
                     let ed = ex * dx + eyd;
@@ -290,7 +224,7 @@ impl Sweep {
                     }
                 }
             }
-            Bit::Bull { .. } => {
+            Shape::Bull { .. } => {
                 for (i, cell) in row.iter_mut().enumerate() {
                     let ex = ex0 + i as f64 * pitch;
                     let ed = ex * dx + eyd;
@@ -374,8 +308,8 @@ mod tests {
     use proptest::prelude::*;
 
     /// The slow reference: the bit placed at `n + 1` evenly spaced positions along the segment.
-    fn sampled(bit: Bit, a: P3, b: P3, x: f64, y: f64, n: usize) -> f64 {
-        let r = bit.radius();
+    fn sampled(bit: Shape, a: P3, b: P3, x: f64, y: f64, n: usize) -> f64 {
+        let r = bit.radius_mm();
         let mut best = f64::INFINITY;
         for k in 0..=n {
             let t = k as f64 / n as f64;
@@ -392,11 +326,14 @@ mod tests {
         best
     }
 
-    fn bits() -> impl Strategy<Value = Bit> {
+    fn bits() -> impl Strategy<Value = Shape> {
         prop_oneof![
-            (0.05..2.0f64).prop_map(|r| Bit::Ball { r }),
-            (0.05..2.0f64).prop_map(|r| Bit::Flat { r }),
-            (0.1..2.0f64, 0.05..1.0f64).prop_map(|(r, f)| Bit::Bull { r, rc: r * f }),
+            (0.05..2.0f64).prop_map(|r| Shape::Ball { diameter_mm: 2.0 * r }),
+            (0.05..2.0f64).prop_map(|r| Shape::Flat { diameter_mm: 2.0 * r }),
+            (0.1..2.0f64, 0.05..1.0f64).prop_map(|(r, f)| Shape::Bull {
+                diameter_mm: 2.0 * r,
+                corner_radius_mm: r * f
+            }),
         ]
     }
 
@@ -419,7 +356,7 @@ mod tests {
             let dense = sampled(bit, a, b, q[0], q[1], n);
             if dense.is_finite() {
                 // exact for ball and flat; the bull's bisection stops within its stated tolerance
-                let slack = if matches!(bit, Bit::Bull { .. }) { BULL_TOLERANCE_MM } else { 1e-12 };
+                let slack = if matches!(bit, Shape::Bull { .. }) { BULL_TOLERANCE_MM } else { 1e-12 };
                 prop_assert!(exact <= dense + slack, "{bit:?} {a:?} {b:?} {q:?}: {exact} above sampled {dense}");
                 // between samples the bit moves by |AB|/n; the sweep height changes by at most that times
                 // the steepest slope met, bounded here by sampling twice as finely
@@ -458,7 +395,7 @@ mod tests {
     #[test]
     fn ball_closed_form_on_the_capsule_axis() {
         // Horizontal segment: the cross-section is the circle z = z0 + r − sqrt(r² − d²).
-        let s = Sweep::new(Bit::Ball { r: 0.5 }, [0.0, 0.0, -0.2], [2.0, 0.0, -0.2]);
+        let s = Sweep::new(Shape::Ball { diameter_mm: 1.0 }, [0.0, 0.0, -0.2], [2.0, 0.0, -0.2]);
         for d in [0.0, 0.1, 0.3, 0.49] {
             let z = s.lowest(1.0, d);
             assert!((z - (-0.2 + 0.5 - (0.25f64 - d * d).sqrt())).abs() < 1e-15, "{d}: {z}");
@@ -466,7 +403,7 @@ mod tests {
         // Sloped segment seen in the middle: the capsule's cross-section perpendicular to the axis is a
         // circle, so the lowest point is r·sqrt(1 + m²) − r below the axis line's tip height (m the slope).
         let m: f64 = 0.4;
-        let s = Sweep::new(Bit::Ball { r: 0.5 }, [0.0, 0.0, 0.0], [2.0, 0.0, 2.0 * m]);
+        let s = Sweep::new(Shape::Ball { diameter_mm: 1.0 }, [0.0, 0.0, 0.0], [2.0, 0.0, 2.0 * m]);
         let z = s.lowest(1.0, 0.0);
         let expect = m - (0.5 * (1.0 + m * m).sqrt() - 0.5);
         assert!((z - expect).abs() < 1e-14, "{z} vs {expect}");
@@ -475,9 +412,16 @@ mod tests {
     #[test]
     fn flat_leaves_a_flat_floor_and_bull_sits_between() {
         let (a, b) = ([0.0, 0.0, -0.1], [1.0, 0.3, -0.1]);
-        let flat = Sweep::new(Bit::Flat { r: 0.5 }, a, b);
-        let bull = Sweep::new(Bit::Bull { r: 0.5, rc: 0.2 }, a, b);
-        let ball = Sweep::new(Bit::Ball { r: 0.5 }, a, b);
+        let flat = Sweep::new(Shape::Flat { diameter_mm: 1.0 }, a, b);
+        let bull = Sweep::new(
+            Shape::Bull {
+                diameter_mm: 1.0,
+                corner_radius_mm: 0.2,
+            },
+            a,
+            b,
+        );
+        let ball = Sweep::new(Shape::Ball { diameter_mm: 1.0 }, a, b);
         for (x, y) in [(0.5, 0.15), (0.2, 0.4), (0.9, -0.1), (-0.3, 0.1)] {
             let (f, u, l) = (flat.lowest(x, y), bull.lowest(x, y), ball.lowest(x, y));
             assert_eq!(f, -0.1);

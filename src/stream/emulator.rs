@@ -921,7 +921,7 @@ impl Controller {
 
     /// Parse and run one G-code block; `Err(code)` is GRBL's error code.
     fn gcode(&mut self, text: &str) -> Result<(), u16> {
-        let ws = program::words(text).map_err(|e| e.code())?;
+        let ws = program::words(text).map_err(|e| e.grbl_code())?;
         let mut m = self.modal;
         let mut seen = std::collections::HashSet::new();
         let mut motion_in_block = None;

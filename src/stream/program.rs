@@ -7,7 +7,6 @@
 //! coordinates, mm** (G20 programs are converted), `None` per axis while the program has not yet set it
 //! with an absolute move.
 
-use std::fmt;
 use std::path::{Path, PathBuf};
 
 /// GRBL 1.1's line buffer (`LINE_BUFFER_SIZE`): 80 bytes including the terminating NUL, so a block may
@@ -19,9 +18,6 @@ pub const MAX_BLOCK_CHARS: usize = LINE_BUFFER_BYTES - 1;
 
 /// The largest line number GRBL accepts in an `N` word (`MAX_LINE_NUMBER`).
 pub const MAX_LINE_NUMBER: usize = 10_000_000;
-
-/// mm per inch.
-const MM_PER_INCH: f64 = 25.4;
 
 /// A program could not be read or is not streamable to GRBL.
 #[derive(Debug, thiserror::Error)]
@@ -78,89 +74,8 @@ pub enum ProgramError {
     },
 }
 
-/// Length units (G20/G21).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum Units {
-    /// G21, millimetres (GRBL's default).
-    Mm,
-    /// G20, inches.
-    Inch,
-}
-
-/// Distance mode (G90/G91).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum Distance {
-    /// G90, absolute (GRBL's default).
-    Absolute,
-    /// G91, incremental.
-    Incremental,
-}
-
-/// Motion mode (modal group 1).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum MotionMode {
-    /// G0 rapid.
-    Rapid,
-    /// G1 linear feed.
-    Linear,
-    /// G2 clockwise arc.
-    ArcCw,
-    /// G3 counter-clockwise arc.
-    ArcCcw,
-    /// G80 motion cancelled.
-    Cancel,
-}
-
-/// Spindle state (M3/M4/M5).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
-pub enum Spindle {
-    /// M5.
-    Off,
-    /// M3, clockwise.
-    Cw,
-    /// M4, counter-clockwise.
-    Ccw,
-}
-
-/// The modal state GRBL keeps between blocks, as far as a resume needs it.
-#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize, serde::Deserialize)]
-pub struct Modal {
-    /// G20/G21.
-    pub units: Units,
-    /// G90/G91.
-    pub distance: Distance,
-    /// G17/G18/G19 as 17, 18, 19.
-    pub plane: u8,
-    /// Group 1 motion mode.
-    pub motion: MotionMode,
-    /// Programmed feed in mm/min (`None` until an F word).
-    pub feed_mm_min: Option<f64>,
-    /// Spindle speed S (rpm).
-    pub spindle_rpm: f64,
-    /// M3/M4/M5.
-    pub spindle: Spindle,
-    /// M7 mist coolant on.
-    pub mist: bool,
-    /// M8 flood coolant on.
-    pub flood: bool,
-}
-
-impl Default for Modal {
-    /// GRBL's state after reset: `G0 G54 G17 G21 G90 G94 M5 M9 T0 F0 S0`.
-    fn default() -> Self {
-        Modal {
-            units: Units::Mm,
-            distance: Distance::Absolute,
-            plane: 17,
-            motion: MotionMode::Rapid,
-            feed_mm_min: None,
-            spindle_rpm: 0.0,
-            spindle: Spindle::Off,
-            mist: false,
-            flood: false,
-        }
-    }
-}
+use crate::gcode::lex::{self, Block};
+pub use crate::gcode::modal::{Distance, Modal, MotionMode, Spindle, Units};
 
 /// What kind of line this is, for the streaming protocol.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -229,43 +144,11 @@ pub struct Program {
     pub fingerprint: u64,
 }
 
-/// A word of a block: a letter and its value.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Word {
-    /// Upper-case letter.
-    pub letter: char,
-    /// Its value.
-    pub value: f64,
-}
+/// A word of a block (the crate's one tokenizer, [`crate::gcode::lex`]).
+pub use crate::gcode::lex::Word;
 
-/// Why a cleaned block could not be split into words; the GRBL error code is given.
-#[derive(Debug, Clone, PartialEq, Eq)]
-pub enum WordError {
-    /// GRBL `error:1`: a character where a letter was expected.
-    ExpectedLetter(char),
-    /// GRBL `error:2`: a letter without a valid number.
-    BadNumber(char),
-}
-
-impl WordError {
-    /// The GRBL 1.1 error code for it.
-    #[must_use]
-    pub fn code(&self) -> u16 {
-        match self {
-            WordError::ExpectedLetter(_) => 1,
-            WordError::BadNumber(_) => 2,
-        }
-    }
-}
-
-impl fmt::Display for WordError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            WordError::ExpectedLetter(c) => write!(f, "expected a command letter, found `{c}`"),
-            WordError::BadNumber(c) => write!(f, "word `{c}` has no valid number"),
-        }
-    }
-}
+/// Why a cleaned block could not be split into words; [`WordError::grbl_code`] gives GRBL's error code.
+pub use crate::gcode::lex::LexErrorKind as WordError;
 
 /// Clean a line as GRBL's serial reader does: drop `(…)` and `;…` comments, whitespace and control
 /// characters and `/`, upper-case letters.
@@ -297,36 +180,11 @@ pub fn clean(line: &str) -> String {
 /// Split a cleaned G-code block into words, as GRBL's parser does (`read_float`: optional sign, digits,
 /// one decimal point, no exponent).
 pub fn words(block: &str) -> Result<Vec<Word>, WordError> {
-    let b = block.as_bytes();
-    let mut i = 0;
-    let mut out = Vec::new();
-    while i < b.len() {
-        let letter = b[i] as char;
-        if !letter.is_ascii_uppercase() {
-            return Err(WordError::ExpectedLetter(letter));
-        }
-        i += 1;
-        let start = i;
-        if i < b.len() && (b[i] == b'-' || b[i] == b'+') {
-            i += 1;
-        }
-        let mut digits = 0;
-        let mut dots = 0;
-        while i < b.len() && (b[i].is_ascii_digit() || b[i] == b'.') {
-            if b[i] == b'.' {
-                dots += 1;
-            } else {
-                digits += 1;
-            }
-            i += 1;
-        }
-        if digits == 0 || dots > 1 {
-            return Err(WordError::BadNumber(letter));
-        }
-        let value: f64 = block[start..i].parse().map_err(|_| WordError::BadNumber(letter))?;
-        out.push(Word { letter, value });
+    match lex::lex(block) {
+        Ok(Block::Words(w)) => Ok(w),
+        Ok(Block::Percent) => Ok(Vec::new()),
+        Err(e) => Err(e.kind),
     }
-    Ok(out)
 }
 
 /// FNV-1a, 64 bit: a cheap fingerprint of the program bytes (not cryptographic; it only guards against
@@ -485,7 +343,7 @@ fn strip_n(cleaned: &str, ws: &[Word]) -> String {
 
 /// Apply a block's words to the modal state and position (the model, not a validator: GRBL checks).
 fn apply(ws: &[Word], modal: &mut Modal, pos: &mut Position, line: &mut Line) {
-    let scale = |m: &Modal| if m.units == Units::Inch { MM_PER_INCH } else { 1.0 };
+    let scale = |m: &Modal| m.units.mm();
     let mut axis: [Option<f64>; 3] = [None; 3];
     let mut motion_word = None;
     let mut non_modal_motion = false;
@@ -513,6 +371,10 @@ fn apply(ws: &[Word], modal: &mut Modal, pos: &mut Position, line: &mut Line) {
                     modal.distance = Distance::Absolute;
                 } else if same(g, 91.0) {
                     modal.distance = Distance::Incremental;
+                } else if same(g, 90.1) {
+                    modal.arc_distance = Distance::Absolute;
+                } else if same(g, 91.1) {
+                    modal.arc_distance = Distance::Incremental;
                 } else if same(g, 28.0) || same(g, 30.0) || same(g, 53.0) || same(g, 92.0) || (38.0..39.0).contains(&g)
                 {
                     non_modal_motion = true;
@@ -610,9 +472,11 @@ mod tests {
     #[test]
     fn words_report_grbl_codes() {
         assert_eq!(words("G1X-1.5").unwrap().len(), 2);
-        assert_eq!(words("1X").unwrap_err().code(), 1);
-        assert_eq!(words("GX1").unwrap_err().code(), 2);
-        assert_eq!(words("X1.2.3").unwrap_err().code(), 2);
+        assert_eq!(words("1X").unwrap_err().grbl_code(), 1);
+        assert_eq!(words("GX1").unwrap_err().grbl_code(), 2);
+        // GRBL's read_float stops at the second point, which is then not a command letter.
+        assert_eq!(words("X1.2.3").unwrap_err().grbl_code(), 1);
+        assert_eq!(words("O100").unwrap_err().grbl_code(), 20);
     }
 
     #[test]

@@ -2,7 +2,7 @@
 //! profile and the tool. A violation names the limit, its value and the offending value.
 
 use super::machine::{Machine, Tool};
-use super::moves::{bounds, Move, P3};
+use crate::gcode::moves::{bounds, Move, P3};
 
 /// Clearance above the stock top (z = 0) below which a rapid may not go, mm.
 pub const RAPID_FLOOR_MM: f64 = 0.5;

@@ -4,13 +4,15 @@
 //! lower hemisphere, `CL(x, y) = max_{|u| ≤ r} h(x + u) + sqrt(r² − |u|²) − r`, taken over the design's
 //! samples: the ball then touches the design at a sample and is on or above every sample it covers, so it
 //! never gouges the sampled design. Between samples the ball's own curvature bounds the miss by
-//! `pitch² / (4r)` (0.05 µm for a 1 mm ball at 10 µm pitch). A flat end mill is the same with a flat disc.
+//! `pitch² / (4r)` (0.05 µm for a 1 mm ball at 10 µm pitch). Any [`Shape`] works the same way with its own
+//! underside `b(ρ)` in place of the hemisphere (a flat end mill's disc takes a sliding maximum instead).
 //!
 //! Rows are computed as a sum of 1D passes: for each design row within `r` of the output row, each column
 //! offset `dx` within the circle contributes `row[i + dx] + b(dx, dy)` to every output column at once — a
 //! branch-free loop the compiler vectorises — and output rows run in parallel with rayon.
 
 use crate::heightfield::Heightfield;
+use crate::tool::Shape;
 use rayon::prelude::*;
 
 /// How samples outside the heightfield are seen.
@@ -22,44 +24,10 @@ pub enum Edge {
     Open,
 }
 
-/// The cutter shape.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Cutter {
-    /// Ball-nose of radius `r` (mm); the CL height is the tip's.
-    Ball {
-        /// Radius, mm.
-        r: f64,
-    },
-    /// Flat end mill of radius `r` (mm).
-    Flat {
-        /// Radius, mm.
-        r: f64,
-    },
-}
-
-impl Cutter {
-    /// Radius, mm.
-    pub fn radius(&self) -> f64 {
-        match *self {
-            Cutter::Ball { r } | Cutter::Flat { r } => r,
-        }
-    }
-
-    /// Height of the cutter's underside above its tip at horizontal offset `d2 = |u|²` (≤ r²): `b(u)` with the
-    /// sign convention of the dilation (0 at the centre, negative outward for a ball).
-    #[inline]
-    pub fn offset(&self, d2: f64) -> f64 {
-        match *self {
-            Cutter::Ball { r } => (r * r - d2).max(0.0).sqrt() - r,
-            Cutter::Flat { .. } => 0.0,
-        }
-    }
-}
-
 /// A drop-cutter over one heightfield.
 pub struct DropCutter<'a> {
     hf: &'a Heightfield,
-    cutter: Cutter,
+    cutter: Shape,
     edge: Edge,
     /// Column offsets reach: `m = ceil(r / pitch)`.
     m: usize,
@@ -67,8 +35,8 @@ pub struct DropCutter<'a> {
 
 impl<'a> DropCutter<'a> {
     /// Prepare a drop-cutter.
-    pub fn new(hf: &'a Heightfield, cutter: Cutter, edge: Edge) -> Self {
-        let m = (cutter.radius() / hf.pitch_mm).ceil() as usize + 1;
+    pub fn new(hf: &'a Heightfield, cutter: Shape, edge: Edge) -> Self {
+        let m = (cutter.radius_mm() / hf.pitch_mm).ceil() as usize + 1;
         Self { hf, cutter, edge, m }
     }
 
@@ -95,7 +63,7 @@ impl<'a> DropCutter<'a> {
     /// CL tip heights along the row at `y` (mm, any value), at the sample columns `x_i = (i + ½)·pitch`.
     /// Columns where the cutter covers no sample are `-∞`.
     pub fn row(&self, y: f64, out: &mut [f64]) {
-        let (nx, p, m, r) = (self.hf.nx, self.hf.pitch_mm, self.m, self.cutter.radius());
+        let (nx, p, m, r) = (self.hf.nx, self.hf.pitch_mm, self.m, self.cutter.radius_mm());
         assert_eq!(out.len(), nx);
         out.iter_mut().for_each(|v| *v = f64::NEG_INFINITY);
         let mut buf = vec![0.0; nx + 2 * m];
@@ -108,13 +76,13 @@ impl<'a> DropCutter<'a> {
                 continue;
             }
             match self.cutter {
-                Cutter::Ball { .. } => {
+                Shape::Ball { .. } | Shape::Bull { .. } => {
                     for di in -(m as isize)..=(m as isize) {
                         let dx = di as f64 * p;
                         if dx * dx > rho2 {
                             continue;
                         }
-                        let b = self.cutter.offset(dx * dx + dy * dy);
+                        let b = -self.cutter.profile_sq(dx * dx + dy * dy);
                         let src = &buf[(m as isize + di) as usize..(m as isize + di) as usize + nx];
                         for (o, s) in out.iter_mut().zip(src) {
                             let v = s + b;
@@ -124,7 +92,7 @@ impl<'a> DropCutter<'a> {
                         }
                     }
                 }
-                Cutter::Flat { .. } => {
+                Shape::Flat { .. } => {
                     let mut w = (rho2.sqrt() / p).floor() as usize;
                     while ((w + 1) as f64 * p).powi(2) <= rho2 {
                         w += 1;
@@ -157,7 +125,7 @@ impl<'a> DropCutter<'a> {
             self.hf.nx as isize,
             self.hf.ny as isize,
             self.hf.pitch_mm,
-            self.cutter.radius(),
+            self.cutter.radius_mm(),
         );
         let (ic, jc) = (x / p - 0.5, y / p - 0.5);
         let mut best = f64::NEG_INFINITY;
@@ -173,7 +141,7 @@ impl<'a> DropCutter<'a> {
                     Edge::Open if i < 0 || j < 0 || i >= nx || j >= ny => continue,
                     Edge::Open => (i, j),
                 };
-                best = best.max(self.hf.at(ii as usize, jj as usize) + self.cutter.offset(d2));
+                best = best.max(self.hf.at(ii as usize, jj as usize) - self.cutter.profile_sq(d2));
             }
         }
         best
@@ -227,10 +195,10 @@ mod tests {
     #[test]
     fn rows_equal_brute_force_on_random_heightfields() {
         for (seed, periodic, cutter) in [
-            (1, true, Cutter::Ball { r: 0.05 }),
-            (2, false, Cutter::Ball { r: 0.037 }),
-            (3, true, Cutter::Flat { r: 0.04 }),
-            (4, false, Cutter::Flat { r: 0.05 }),
+            (1, true, Shape::Ball { diameter_mm: 0.1 }),
+            (2, false, Shape::Ball { diameter_mm: 0.074 }),
+            (3, true, Shape::Flat { diameter_mm: 0.08 }),
+            (4, false, Shape::Flat { diameter_mm: 0.1 }),
         ] {
             let hf = random_hf(37, 29, 0.01, seed, periodic);
             let edge = if periodic { Edge::Periodic } else { Edge::Open };
@@ -265,7 +233,7 @@ mod tests {
                 hf.z_mm[j * 300 + i] = a * (i as f64 + 0.5) * p + b * (j as f64 + 0.5) * p;
             }
         }
-        let dc = DropCutter::new(&hf, Cutter::Ball { r }, Edge::Open);
+        let dc = DropCutter::new(&hf, Shape::Ball { diameter_mm: 2.0 * r }, Edge::Open);
         let mut row = vec![0.0; 300];
         for y in [1.0, 1.5037, 2.0] {
             dc.row(y, &mut row);
@@ -294,7 +262,7 @@ mod tests {
                 }
             }
         }
-        let dc = DropCutter::new(&hf, Cutter::Ball { r }, Edge::Open);
+        let dc = DropCutter::new(&hf, Shape::Ball { diameter_mm: 2.0 * r }, Edge::Open);
         for (x, y) in [(0.0, 0.0), (0.3, 0.1), (-0.4, 0.45), (0.6, -0.2)] {
             let (px, py) = (x + c, y + c);
             let rho2 = x * x + y * y;

@@ -7,7 +7,7 @@
 //! speed change within `v² = v₀² + 2·a·d`; each segment then takes the time of its trapezoid (or triangle).
 
 use super::machine::Machine;
-use super::moves::{Move, P3};
+use crate::gcode::moves::{Move, P3};
 
 struct Seg {
     len: f64,

@@ -6,21 +6,14 @@
 //! aluminium and for wax/plastics. Unknown keys are refused (with the line), so a typo never silently falls
 //! back to a default.
 
+use crate::tool::Shape;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// The profile format version this build reads.
 pub const VERSION: u32 = 1;
 
-/// Controller dialect of the G-code.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Dialect {
-    /// GRBL 1.1: no G64 (its junction deviation `$11` plays that role), `M2`, no `%`.
-    Grbl,
-    /// LinuxCNC: `G64 P<tolerance>` path blending, `M2`.
-    Linuxcnc,
-}
+pub use crate::gcode::Dialect;
 
 /// Machine travel, mm.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -74,18 +67,6 @@ pub struct ProgramDefaults {
     pub spindle_dwell_s: f64,
 }
 
-/// Cutter geometry.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum ToolKind {
-    /// Ball-nose end mill.
-    Ball,
-    /// Flat end mill.
-    Flat,
-    /// Bull-nose end mill (flat with a corner radius).
-    Bull,
-}
-
 /// Cutting data for one stock material.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -100,28 +81,71 @@ pub struct CuttingData {
     pub max_depth_of_cut_mm: f64,
 }
 
-/// A tool in the machine's library.
+/// A tool in the machine's library: its geometry (the crate's one tool model, [`Shape`]), reach, number and
+/// cutting data. In the profile the geometry is written as `kind`, `diameter_mm` and `corner_radius_mm`
+/// (bull-nose only; a ball's may be given and must then be its radius), checked when the profile loads.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(try_from = "ToolRecord", into = "ToolRecord")]
 pub struct Tool {
     /// Identifier used on the command line (`--tool ID`).
     pub id: String,
     /// Geometry.
-    pub kind: ToolKind,
-    /// Cutting diameter, mm.
-    pub diameter_mm: f64,
-    /// Corner radius of a bull-nose, mm (0 for flat; the radius for ball).
-    #[serde(default)]
-    pub corner_radius_mm: f64,
+    pub shape: Shape,
     /// Flute (cutting) length, mm: the deepest the tool can reach below the stock top.
     pub flute_length_mm: f64,
     /// Tool number in the tool changer / table.
-    #[serde(default)]
     pub number: u32,
     /// Cutting data in aluminium.
     pub aluminium: CuttingData,
     /// Cutting data in machining wax and plastics.
     pub wax: CuttingData,
+}
+
+/// A tool as written in a profile.
+#[derive(Clone, Debug, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ToolRecord {
+    id: String,
+    kind: String,
+    diameter_mm: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    corner_radius_mm: Option<f64>,
+    flute_length_mm: f64,
+    #[serde(default)]
+    number: u32,
+    aluminium: CuttingData,
+    wax: CuttingData,
+}
+
+impl TryFrom<ToolRecord> for Tool {
+    type Error = String;
+    fn try_from(r: ToolRecord) -> Result<Tool, String> {
+        let shape = Shape::from_parts(&r.kind, r.diameter_mm, r.corner_radius_mm)
+            .map_err(|e| format!("tool `{}`: {e}", r.id))?;
+        Ok(Tool {
+            id: r.id,
+            shape,
+            flute_length_mm: r.flute_length_mm,
+            number: r.number,
+            aluminium: r.aluminium,
+            wax: r.wax,
+        })
+    }
+}
+
+impl From<Tool> for ToolRecord {
+    fn from(t: Tool) -> ToolRecord {
+        ToolRecord {
+            id: t.id,
+            kind: t.shape.kind().into(),
+            diameter_mm: t.shape.diameter_mm(),
+            corner_radius_mm: matches!(t.shape, Shape::Bull { .. }).then(|| t.shape.corner_radius_mm()),
+            flute_length_mm: t.flute_length_mm,
+            number: t.number,
+            aluminium: t.aluminium,
+            wax: t.wax,
+        }
+    }
 }
 
 /// Stock material (selects the cutting data).
@@ -145,7 +169,12 @@ impl Tool {
 
     /// Radius, mm.
     pub fn radius_mm(&self) -> f64 {
-        self.diameter_mm / 2.0
+        self.shape.radius_mm()
+    }
+
+    /// Diameter, mm.
+    pub fn diameter_mm(&self) -> f64 {
+        self.shape.diameter_mm()
     }
 }
 
@@ -248,17 +277,8 @@ impl Machine {
             if self.tools[..k].iter().any(|o| o.id == t.id) {
                 return Err(format!("tool id `{}` is used twice", t.id));
             }
-            pos(&f("diameter_mm"), t.diameter_mm)?;
+            t.shape.validate().map_err(|e| format!("{}: {e}", f("shape")))?;
             pos(&f("flute_length_mm"), t.flute_length_mm)?;
-            match t.kind {
-                ToolKind::Bull if !(t.corner_radius_mm > 0.0 && t.corner_radius_mm < t.radius_mm()) => {
-                    return Err(format!(
-                        "{} must be in (0, diameter/2) for a bull-nose",
-                        f("corner_radius_mm")
-                    ))
-                }
-                _ => {}
-            }
             for (name, c) in [("aluminium", &t.aluminium), ("wax", &t.wax)] {
                 pos(&f(&format!("{name}.feed_mm_min")), c.feed_mm_min)?;
                 pos(&f(&format!("{name}.plunge_mm_min")), c.plunge_mm_min)?;
@@ -305,7 +325,7 @@ mod tests {
         for p in all {
             let m = Machine::load(&p).unwrap_or_else(|e| panic!("{e}"));
             assert!(
-                m.tools.iter().any(|t| t.kind == ToolKind::Ball),
+                m.tools.iter().any(|t| matches!(t.shape, Shape::Ball { .. })),
                 "{}: no ball-nose",
                 p.display()
             );

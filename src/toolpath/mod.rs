@@ -12,16 +12,15 @@
 pub mod check;
 pub mod dropcutter;
 pub mod estimate;
-pub mod gcode;
 pub mod machine;
-pub mod moves;
 pub mod raster;
 pub mod simplify;
 
+use crate::gcode::emit;
+use crate::gcode::moves::{self, Move, P3};
 use crate::heightfield::Heightfield;
-use dropcutter::Cutter;
-use machine::{Machine, Stock, Tool, ToolKind};
-use moves::{Move, P3};
+use crate::tool::Shape;
+use machine::{Machine, Stock};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -135,17 +134,6 @@ pub struct Program {
     pub summary: Summary,
 }
 
-fn cutter_of(tool: &Tool) -> Result<Cutter, ToolpathError> {
-    match tool.kind {
-        ToolKind::Ball => Ok(Cutter::Ball { r: tool.radius_mm() }),
-        ToolKind::Flat => Ok(Cutter::Flat { r: tool.radius_mm() }),
-        ToolKind::Bull => Err(ToolpathError::Config(format!(
-            "tool `{}` is a bull-nose: this build's drop-cutter handles ball and flat end mills",
-            tool.id
-        ))),
-    }
-}
-
 /// Clearance above the stock where lead-ins start and lead-outs end, mm.
 const LEAD_MM: f64 = check::RAPID_FLOOR_MM;
 
@@ -198,10 +186,11 @@ impl Builder {
 pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Result<Program, ToolpathError> {
     let bad = |s: String| Err(ToolpathError::Config(s));
     let tool = machine.tool(&cfg.tool).map_err(ToolpathError::Config)?;
-    if tool.kind != ToolKind::Ball {
+    if !matches!(tool.shape, Shape::Ball { .. }) {
         return bad(format!(
             "finishing needs a ball-nose tool; `{}` is {:?}",
-            tool.id, tool.kind
+            tool.id,
+            tool.shape.kind()
         ));
     }
     let rough = if cfg.rough_tool.is_empty() {
@@ -244,8 +233,8 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         cut.feed_mm_min
     };
     let rough_cut = rough.cutting(cfg.stock);
-    let finish_cutter = cutter_of(tool)?;
-    let rough_cutter = cutter_of(rough)?;
+    let finish_cutter = tool.shape;
+    let rough_cutter = rough.shape.normalized();
     let margin = r.max(rough.radius_mm()) + 3.0 * tile.pitch_mm;
     let design = raster::RotatedDesign::new(tile, (ax, ay), cfg.angle_deg, margin);
     let (vmin, vmax) = design.v_range();
@@ -286,8 +275,15 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
     if depth > rough_cut.max_depth_of_cut_mm {
         let leave = rough_cut.max_depth_of_cut_mm / 3.0;
         let rs = match rough_cutter {
-            Cutter::Ball { r } => raster::stepover_for_scallop(r, leave).min(1.6 * r),
-            Cutter::Flat { r } => r,
+            Shape::Ball { diameter_mm } => {
+                raster::stepover_for_scallop(diameter_mm / 2.0, leave).min(0.8 * diameter_mm)
+            }
+            Shape::Flat { diameter_mm } => diameter_mm / 2.0,
+            // the flat part overlaps, the corners leave a ball's scallop between them
+            Shape::Bull {
+                diameter_mm,
+                corner_radius_mm: rc,
+            } => (diameter_mm - 2.0 * rc + raster::stepover_for_scallop(rc, leave)).min(0.8 * diameter_mm),
         };
         let rdc = design.cutter(rough_cutter);
         let rvs = raster::pass_positions(vmin, vmax, rs);
@@ -366,7 +362,10 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         format!("machine: {} [{:?}]", machine.name, machine.dialect),
         format!(
             "tool: {} {:?} D{} mm, stock {:?}",
-            tool.id, tool.kind, tool.diameter_mm, cfg.stock
+            tool.id,
+            tool.shape.kind(),
+            tool.diameter_mm(),
+            cfg.stock
         ),
         format!(
             "finishing: stepover {:.4} mm, scallop {scallop:.3} um, angle {} deg, {:?}",
@@ -390,7 +389,7 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
             hms(est)
         ),
     ];
-    let gcode = gcode::emit(machine.dialect, &header, machine.limits.path_tolerance_mm, &moves);
+    let gcode = emit::emit(machine.dialect, &header, machine.limits.path_tolerance_mm, &moves);
     let summary = Summary {
         lines: gcode.lines().count(),
         feed_length_mm: len.feed_mm,

@@ -6,9 +6,10 @@
 //! of the tile's pitch covering the area plus a margin of the cutter radius, exactly at the tile's samples
 //! when the angle is 0° (bilinearly between them otherwise), and the drop-cutter runs on that grid.
 
-use super::dropcutter::{Cutter, DropCutter, Edge};
-use super::moves::P3;
+use super::dropcutter::{DropCutter, Edge};
+use crate::gcode::moves::P3;
 use crate::heightfield::Heightfield;
+use crate::tool::Shape;
 use rayon::prelude::*;
 
 /// The design on the rotated `(u, v)` grid.
@@ -107,7 +108,7 @@ impl RotatedDesign {
     }
 
     /// A drop-cutter over this grid.
-    pub fn cutter(&self, cutter: Cutter) -> DropCutter<'_> {
+    pub fn cutter(&self, cutter: Shape) -> DropCutter<'_> {
         DropCutter::new(&self.hf, cutter, Edge::Open)
     }
 
@@ -199,7 +200,7 @@ mod tests {
         let d = RotatedDesign::new(&tile, (2.0, 1.0), 90.0, 0.2);
         let (vmin, vmax) = d.v_range();
         assert!((vmin + 2.0).abs() < 1e-12 && vmax.abs() < 1e-12, "{vmin} {vmax}");
-        let dc = d.cutter(Cutter::Ball { r: 0.15 });
+        let dc = d.cutter(Shape::Ball { diameter_mm: 0.3 });
         let pts = d.pass(&dc, -1.0, |z| z);
         // a pass at v = -1 runs along y at x = 1; over a flat tile the ball's tip sits on it, or below by at
         // most the sag between samples

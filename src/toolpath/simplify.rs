@@ -5,7 +5,7 @@
 //! dropped and never cuts deeper than the CL surface. Runs of exactly collinear points (the planar facets)
 //! collapse to their end points whatever the tolerance.
 
-use super::moves::P3;
+use crate::gcode::moves::P3;
 
 /// Greedy one-sided simplification: the kept points, first and last always kept. O(n): while a chord from
 /// the last kept point `a` is extended, the interval of chord slopes that keeps every point passed within

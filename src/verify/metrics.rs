@@ -45,6 +45,33 @@ impl Default for Tolerances {
     }
 }
 
+impl Tolerances {
+    /// Check that every bound is a number and the band is ordered; the error names the field.
+    pub fn validate(&self) -> Result<(), String> {
+        let [lo, hi] = self.cov_ratio;
+        if !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo <= hi) {
+            return Err(format!(
+                "`cov_ratio` must be [low, high] with 0 < low ≤ high, got [{lo}, {hi}]"
+            ));
+        }
+        for (field, v) in [
+            ("ndf_l1_max", self.ndf_l1_max),
+            ("ndf_corr_min", self.ndf_corr_min),
+            ("ndf_js_max", self.ndf_js_max),
+            ("peak_offset_deg_max", self.peak_offset_deg_max),
+            ("albedo_rel_max", self.albedo_rel_max),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Err(format!("`{field}` must be a number ≥ 0, got {v}"));
+            }
+        }
+        if self.ndf_corr_min > 1.0 {
+            return Err(format!("`ndf_corr_min` must be at most 1, got {}", self.ndf_corr_min));
+        }
+        Ok(())
+    }
+}
+
 /// One checked figure.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Check {

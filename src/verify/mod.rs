@@ -5,15 +5,20 @@
 //! whole base lobe `K` before the comparison; the milled surface's NDF already carries the tool marks, so it
 //! is convolved only with the part of `K` that the simulation does not model (the material's own polish).
 //!
+//! - [`run`]: the stage's entry point, `run(&VerifyConfig, &VerifyInput) -> VerifyOutput`,
 //! - [`metrics`]: the figures and their tolerances (`metrics.json`),
+//! - [`explain`]: plain-word reasons for every failing figure,
 //! - [`render`]: sphere previews and BRDF slices,
 //! - [`report`]: the single-page offline HTML report.
 
+pub mod explain;
 pub mod metrics;
 pub mod render;
 pub mod report;
+mod run;
 
 pub use metrics::{SurfaceMetrics, Tolerances};
+pub use run::{run, VerifyConfig, VerifyError, VerifyInput, VerifyOutput};
 
 use serde::{Deserialize, Serialize};
 

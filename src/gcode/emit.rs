@@ -9,8 +9,8 @@
 //! controller, so the program only notes it in the header. LinuxCNC gets `G64 P<tolerance>`. Both get
 //! `G21 G90 G17 G94`, `M3 S…` then a `G4` dwell before the first cut, a retract to safe z, `M5` and `M2`.
 
-use super::machine::Dialect;
 use super::moves::{Move, P3};
+use super::Dialect;
 use std::fmt::Write;
 
 /// Format a coordinate: 4 decimals, trailing zeros trimmed, no negative zero.

@@ -1,0 +1,28 @@
+//! The crate's one model of G-code, below every stage that reads or writes it.
+//!
+//! - [`lex`]: the tokenizer (words with their columns, comments, `%`), shared by the simulator's reader and
+//!   the streamer's program model;
+//! - [`modal`]: the modal state between blocks (units, distance modes, plane, motion, feed, spindle);
+//! - [`moves`]: the machine-independent move list that `toolpath` produces, the checker and time estimator
+//!   read, the emitter writes and the simulator's reader returns;
+//! - [`emit`]: the modal writer of a move list for a controller [`Dialect`].
+//!
+//! Readers built on these: `simulate::gcode` (any program → straight segments, refusing what it does not
+//! understand) and `stream::program` (a program annotated line by line for streaming and resume).
+
+pub mod emit;
+pub mod lex;
+pub mod modal;
+pub mod moves;
+
+use serde::{Deserialize, Serialize};
+
+/// Controller dialect of a program.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Dialect {
+    /// GRBL 1.1: no G64 (its junction deviation `$11` plays that role), `M2`, no `%`.
+    Grbl,
+    /// LinuxCNC: `G64 P<tolerance>` path blending, `M2`.
+    Linuxcnc,
+}

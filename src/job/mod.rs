@@ -1,0 +1,253 @@
+//! `JOB.toml`: every stage of the pipeline in one documented, versioned file, and the runner behind
+//! `brdfmill run`.
+//!
+//! ```toml
+//! version = 1
+//! name = "isotropic GGX, aluminium"
+//!
+//! [target]
+//! brdf = "ggx:alpha=0.3,material=aluminium"  # any BRDF spec (see README)
+//! base = "scallop"                           # the base lobe deconvolved: "scallop" (the finishing raster's
+//!                                            # own lobe, computed from the bit and stepover), "none", or a spec
+//! polish = "beckmann:alpha=0.05"             # optional: the material's own polish lobe (with base = "scallop"
+//!                                            # it is convolved into the base; the milled NDF is blurred by it)
+//!
+//! [machine]
+//! profile = "../machines/grbl-3018.toml"     # relative to this file
+//!
+//! [ndf]        # NdfConfig: res, max_angle_deg, iterations, tolerance, [ndf.half_angle]
+//! [facets]     # FacetsConfig: facets_x, facets_y, facet_mm, pitch_um, seed, max_slope_deg, ... [facets.anneal]
+//! [toolpath]   # ToolpathConfig: tool, rough_tool, stock, area_mm, scallop_um, angle_deg, strategy, ...
+//! [simulate]   # pitch_um, arc_tolerance_um
+//! [verify]     # VerifyConfig: incident_deg, prefilter_um, wavelength_um, coherence_sigma_um, wave_patch_mm, [verify.tolerances]
+//! ```
+//!
+//! Unknown keys are refused with their line; the machine profile, the tool and the combination of
+//! parameters are checked before any work starts ([`Job::load`]).
+
+use crate::brdf::Brdf;
+use crate::facets::FacetsConfig;
+use crate::ndf::NdfConfig;
+use crate::tool::Shape;
+use crate::toolpath::{machine::Machine, ToolpathConfig};
+use crate::verify::VerifyConfig;
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+/// The job format version this build reads.
+pub const VERSION: u32 = 1;
+
+/// `[target]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TargetSection {
+    /// The target BRDF spec.
+    pub brdf: String,
+    /// `"scallop"`, `"none"` or a BRDF spec.
+    #[serde(default = "default_base")]
+    pub base: String,
+    /// The material's own polish lobe (a BRDF spec), optional.
+    #[serde(default)]
+    pub polish: Option<String>,
+}
+
+fn default_base() -> String {
+    "scallop".into()
+}
+
+/// `[machine]`.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MachineSection {
+    /// Machine profile path, relative to the job file.
+    pub profile: String,
+}
+
+/// `[simulate]`.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct SimulateSection {
+    /// Stock grid pitch, µm.
+    pub pitch_um: f64,
+    /// Arc linearisation tolerance, µm.
+    pub arc_tolerance_um: f64,
+}
+
+impl Default for SimulateSection {
+    fn default() -> Self {
+        Self {
+            pitch_um: 5.0,
+            arc_tolerance_um: 0.1,
+        }
+    }
+}
+
+/// A job file.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Job {
+    /// [`VERSION`].
+    pub version: u32,
+    /// A name for the report.
+    pub name: String,
+    /// The target.
+    pub target: TargetSection,
+    /// The machine.
+    pub machine: MachineSection,
+    /// NDF stage.
+    #[serde(default)]
+    pub ndf: NdfConfig,
+    /// Facets stage.
+    #[serde(default)]
+    pub facets: FacetsConfig,
+    /// Toolpath stage.
+    #[serde(default)]
+    pub toolpath: ToolpathConfig,
+    /// Simulation.
+    #[serde(default)]
+    pub simulate: SimulateSection,
+    /// Verification.
+    #[serde(default)]
+    pub verify: VerifyConfig,
+}
+
+/// A job that cannot run, or a stage that failed.
+#[derive(Debug, thiserror::Error)]
+pub enum JobError {
+    /// The job file is wrong: the message names the key and the reason.
+    #[error("{path}: {reason}")]
+    Invalid {
+        /// The job file.
+        path: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A stage failed.
+    #[error("{stage}: {message}")]
+    Stage {
+        /// Which stage.
+        stage: &'static str,
+        /// Its error.
+        message: String,
+    },
+    /// An output could not be written.
+    #[error(transparent)]
+    Write(#[from] crate::io::WriteError),
+}
+
+/// A job checked and ready to run: the parsed inputs it needs.
+pub struct Ready {
+    /// The job.
+    pub job: Job,
+    /// The job file's folder.
+    pub dir: PathBuf,
+    /// The target BRDF.
+    pub target: Brdf,
+    /// The machine.
+    pub machine: Machine,
+    /// Path of the machine profile.
+    pub machine_path: PathBuf,
+}
+
+impl Job {
+    /// Read a job file and check everything that can be checked before work starts.
+    pub fn load(path: &Path) -> Result<Ready, JobError> {
+        let invalid = |reason: String| JobError::Invalid {
+            path: path.display().to_string(),
+            reason,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| invalid(format!("cannot read the job file: {e}")))?;
+        let raw: toml::Value = toml::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+        match raw.get("version").and_then(|v| v.as_integer()) {
+            Some(v) if v == VERSION as i64 => {}
+            Some(v) => {
+                return Err(invalid(format!(
+                    "`version` = {v}: this build reads job files of version {VERSION}"
+                )))
+            }
+            None => return Err(invalid(format!("missing `version` (expected version = {VERSION})"))),
+        }
+        let job: Job = toml::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+        let dir = path
+            .parent()
+            .map(Path::to_path_buf)
+            .unwrap_or_else(|| PathBuf::from("."));
+        let target =
+            Brdf::parse(&resolve_spec(&job.target.brdf, &dir)).map_err(|e| invalid(format!("`target.brdf`: {e}")))?;
+        if !matches!(job.target.base.as_str(), "scallop" | "none") {
+            Brdf::parse(&resolve_spec(&job.target.base, &dir)).map_err(|e| invalid(format!("`target.base`: {e}")))?;
+        }
+        if let Some(p) = &job.target.polish {
+            Brdf::parse(&resolve_spec(p, &dir)).map_err(|e| invalid(format!("`target.polish`: {e}")))?;
+        }
+        let machine_path = dir.join(&job.machine.profile);
+        let machine = Machine::load(&machine_path).map_err(|e| invalid(format!("`machine.profile`: {e}")))?;
+        let tool = machine
+            .tool(&job.toolpath.tool)
+            .map_err(|e| invalid(format!("`toolpath.tool`: {e}")))?;
+        if !matches!(tool.shape, Shape::Ball { .. }) {
+            return Err(invalid(format!(
+                "`toolpath.tool` = `{}` is {:?}: finishing needs a ball-nose",
+                tool.id,
+                tool.shape.kind()
+            )));
+        }
+        job.ndf.validate().map_err(|e| invalid(e.to_string()))?;
+        job.facets.validate().map_err(|e| invalid(e.to_string()))?;
+        if tool.diameter_mm() > job.facets.facet_mm + 1e-9 {
+            return Err(invalid(format!(
+                "impossible combination: `toolpath.tool` `{}` is {} mm across, larger than a facet (`facets.facet_mm` = {} mm); the bit could not cut one facet's plane",
+                tool.id, tool.diameter_mm(), job.facets.facet_mm
+            )));
+        }
+        let [ax, ay] = job.toolpath.area_mm;
+        if ax > machine.travel.x_mm || ay > machine.travel.y_mm {
+            return Err(invalid(format!(
+                "impossible combination: `toolpath.area_mm` = [{ax}, {ay}] is larger than the machine's travel {}×{} mm ({})",
+                machine.travel.x_mm,
+                machine.travel.y_mm,
+                machine_path.display()
+            )));
+        }
+        if !(ax > 0.0 && ay > 0.0) {
+            return Err(invalid(format!(
+                "`toolpath.area_mm` must be positive, got [{ax}, {ay}]"
+            )));
+        }
+        if job.simulate.pitch_um.is_nan() || job.simulate.pitch_um <= 0.0 {
+            return Err(invalid(format!(
+                "`simulate.pitch_um` must be positive, got {}",
+                job.simulate.pitch_um
+            )));
+        }
+        job.verify.validate().map_err(|e| invalid(e.to_string()))?;
+        Ok(Ready {
+            job,
+            dir,
+            target,
+            machine,
+            machine_path,
+        })
+    }
+}
+
+/// Paths in `merl:`, `rgl:` and `csv:` specs are relative to the job file.
+pub(crate) fn resolve_spec(spec: &str, dir: &Path) -> String {
+    for kind in ["merl:", "rgl:", "csv:"] {
+        if let Some(rest) = spec.strip_prefix(kind) {
+            let (path, tail) = rest
+                .split_once(',')
+                .map(|(a, b)| (a, format!(",{b}")))
+                .unwrap_or((rest, String::new()));
+            let p = Path::new(path.trim());
+            let full = if p.is_absolute() { p.to_path_buf() } else { dir.join(p) };
+            return format!("{kind}{}{tail}", full.display());
+        }
+    }
+    spec.to_string()
+}
+
+mod run;
+mod summary;
+
+pub use run::{run, Outcome, Stage};

@@ -1,0 +1,349 @@
+//! The runner behind `brdfmill run`: each stage in order, its artifacts written as they are made. Only
+//! sequencing lives here; what each stage computes is the stage's own `run`.
+
+use super::{resolve_spec, JobError, Ready};
+use crate::brdf::Brdf;
+use crate::facets::{self, Tile, TileFile};
+use crate::ndf::{self, Kernel, Ndf, NdfFile};
+use crate::simulate::{self, Deviation, SimFile, SimulateConfig, Simulation};
+use crate::tool::Shape;
+use crate::toolpath::{self, raster, ToolpathConfig};
+use crate::verify::{self, report, Metrics, VerifyInput};
+use std::path::{Path, PathBuf};
+
+/// Pipeline stages, for progress reporting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// BRDF → NDF.
+    Ndf,
+    /// NDF → tile.
+    Facets,
+    /// Tile → G-code.
+    Toolpath,
+    /// G-code → milled surface.
+    Simulate,
+    /// Metrics, figures, report.
+    Verify,
+}
+
+impl Stage {
+    /// Display name.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Stage::Ndf => "ndf",
+            Stage::Facets => "facets",
+            Stage::Toolpath => "toolpath",
+            Stage::Simulate => "simulate",
+            Stage::Verify => "verify",
+        }
+    }
+}
+
+/// What the run produced.
+pub struct Outcome {
+    /// The metrics.
+    pub metrics: Metrics,
+    /// Files written, in order.
+    pub artifacts: Vec<PathBuf>,
+    /// Per stage, seconds.
+    pub timings: Vec<(Stage, f64)>,
+    /// The report's path.
+    pub report: PathBuf,
+}
+
+fn stage_error(stage: &'static str, e: impl std::fmt::Display) -> JobError {
+    JobError::Stage {
+        stage,
+        message: e.to_string(),
+    }
+}
+
+fn stage_err<E: std::fmt::Display>(stage: &'static str) -> impl Fn(E) -> JobError {
+    move |e| JobError::Stage {
+        stage,
+        message: e.to_string(),
+    }
+}
+
+/// The NDF stage's products.
+struct NdfStage {
+    ndf: Ndf,
+    kernel: Option<Kernel>,
+    polish: Option<Brdf>,
+}
+
+/// Artifacts written so far, in order.
+struct Out<'a> {
+    dir: &'a Path,
+    written: Vec<PathBuf>,
+}
+
+impl Out<'_> {
+    fn write(&mut self, name: &str, bytes: &[u8]) -> Result<(), JobError> {
+        let p = self.dir.join(name);
+        crate::io::write_atomic(&p, bytes)?;
+        self.written.push(p);
+        Ok(())
+    }
+}
+
+/// Run every stage in order, writing each artifact to `out` as it is made. `progress(stage, started)` is
+/// called when a stage starts (`true`) and ends (`false`).
+pub fn run(ready: &Ready, out: &Path, progress: &mut dyn FnMut(Stage, bool)) -> Result<Outcome, JobError> {
+    let job = &ready.job;
+    let mut o = Out {
+        dir: out,
+        written: vec![],
+    };
+    let mut timings = vec![];
+    let mut clock = std::time::Instant::now();
+    let mut step = |stage: Stage, timings: &mut Vec<(Stage, f64)>, started: bool| {
+        progress(stage, started);
+        if !started {
+            timings.push((stage, clock.elapsed().as_secs_f64()));
+        }
+        clock = std::time::Instant::now();
+    };
+    let tool = ready
+        .machine
+        .tool(&job.toolpath.tool)
+        .map_err(stage_err("toolpath"))?
+        .clone();
+    let r = tool.radius_mm();
+    let stepover = if job.toolpath.stepover_mm > 0.0 {
+        job.toolpath.stepover_mm
+    } else {
+        raster::stepover_for_scallop(r, job.toolpath.scallop_um * 1e-3)
+    };
+
+    step(Stage::Ndf, &mut timings, true);
+    let nd = ndf_stage(ready, r, stepover, &mut o)?;
+    step(Stage::Ndf, &mut timings, false);
+
+    step(Stage::Facets, &mut timings, true);
+    let (tile, tile_png) = facets_stage(ready, &nd.ndf, &mut o)?;
+    step(Stage::Facets, &mut timings, false);
+
+    step(Stage::Toolpath, &mut timings, true);
+    let mut tcfg = job.toolpath.clone();
+    if tcfg.job == ToolpathConfig::default().job {
+        tcfg.job = job.name.clone();
+    }
+    let program = toolpath::run(&tcfg, &tile.heightfield, &ready.machine).map_err(stage_err("toolpath"))?;
+    o.write("program.nc", program.gcode.as_bytes())?;
+    let summary = serde_json::to_string_pretty(&program.summary).map_err(stage_err("toolpath"))?;
+    o.write("program.json", summary.as_bytes())?;
+    step(Stage::Toolpath, &mut timings, false);
+
+    step(Stage::Simulate, &mut timings, true);
+    let shape = Shape::Ball {
+        diameter_mm: tool.diameter_mm(),
+    };
+    let (sim, dev, sim_png, dev_png) = simulate_stage(ready, shape, &program.gcode, &tile.heightfield, &mut o)?;
+    step(Stage::Simulate, &mut timings, false);
+
+    step(Stage::Verify, &mut timings, true);
+    let v = verify::run(
+        &job.verify,
+        &VerifyInput {
+            target: &ready.target,
+            ndf: &nd.ndf,
+            ndf_config: &job.ndf,
+            base: nd.kernel.as_ref(),
+            polish: nd.polish.as_ref(),
+            base_is_scallop: job.target.base == "scallop",
+            tile: &tile,
+            sim: &sim,
+            deviation: &dev,
+            tool_radius_mm: r,
+            stepover_mm: stepover,
+        },
+    )
+    .map_err(stage_err("verify"))?;
+    o.write("wave.png", &v.wave_png.to_png())?;
+    let metrics_json = serde_json::to_string_pretty(&v.metrics).map_err(stage_err("verify"))?;
+    o.write("metrics.json", metrics_json.as_bytes())?;
+    let mut figures = v.figures;
+    figures.extend(surface_figures(
+        ready,
+        &tool.diameter_mm(),
+        &dev,
+        tile_png,
+        sim_png,
+        dev_png,
+    ));
+    let html = report::Report {
+        title: job.name.clone(),
+        metrics: &v.metrics,
+        figures,
+        parameters: super::summary::parameters(ready, &nd.ndf, &tile, &sim),
+        program: super::summary::program(&program.summary),
+        artifacts: listed(&o.written),
+    }
+    .to_html();
+    o.write("report.html", html.as_bytes())?;
+    step(Stage::Verify, &mut timings, false);
+    Ok(Outcome {
+        metrics: v.metrics,
+        artifacts: o.written,
+        timings,
+        report: out.join("report.html"),
+    })
+}
+
+/// BRDF → NDF: the base lobe (the finishing raster's scallop lobe by default), Lucy–Richardson, `ndf.json`.
+fn ndf_stage(ready: &Ready, r: f64, stepover: f64, o: &mut Out) -> Result<NdfStage, JobError> {
+    let job = &ready.job;
+    let domain = job.ndf.domain();
+    let polish = match &job.target.polish {
+        Some(p) => Some(Brdf::parse(&resolve_spec(p, &ready.dir)).map_err(|e| stage_error("ndf", e))?),
+        None => None,
+    };
+    let kernel = match job.target.base.as_str() {
+        "none" => None,
+        "scallop" => Some(
+            Kernel::scallop(&domain, r, stepover, job.toolpath.angle_deg, polish.as_ref(), &job.ndf)
+                .map_err(|e| stage_error("ndf", e))?,
+        ),
+        spec => {
+            let b = Brdf::parse(&resolve_spec(spec, &ready.dir)).map_err(|e| stage_error("ndf", e))?;
+            Some(Kernel::from_brdf(&b, &domain, &job.ndf).map_err(|e| stage_error("ndf", e))?)
+        }
+    };
+    let n = ndf::run_with_kernel(&job.ndf, &ready.target, kernel.as_ref()).map_err(|e| stage_error("ndf", e))?;
+    o.write("ndf.json", NdfFile::from(&n).to_json().as_bytes())?;
+    o.write("ndf.png", &ndf::render_pair_png(&n).to_png())?;
+    Ok(NdfStage { ndf: n, kernel, polish })
+}
+
+/// NDF → facet tile: `tile.json`, `tile.npy`, `tile.png`, `tile.stl`. Returns the tile and its relief PNG.
+fn facets_stage(ready: &Ready, n: &Ndf, o: &mut Out) -> Result<(Tile, Vec<u8>), JobError> {
+    let tile = facets::run(&ready.job.facets, &n.target).map_err(stage_err("facets"))?;
+    let tile_file = TileFile::new(
+        &tile,
+        facets::format::Source {
+            ndf: "ndf.json".into(),
+            brdf: n.brdf_spec.clone(),
+            base: n.base_spec.clone(),
+        },
+        "tile.npy",
+    );
+    let tile_png = tile.relief_png().to_png();
+    o.write("tile.json", tile_file.to_json().as_bytes())?;
+    tile.heightfield.write_npy(&o.dir.join("tile.npy"))?;
+    o.written.push(o.dir.join("tile.npy"));
+    o.write("tile.png", &tile_png)?;
+    o.write("tile.stl", &tile.stl())?;
+    Ok((tile, tile_png))
+}
+
+/// G-code → milled surface and its deviation from the design: `sim.npy`, `sim.png`, `deviation.png`,
+/// `sim.json`.
+fn simulate_stage(
+    ready: &Ready,
+    shape: Shape,
+    gcode: &str,
+    design: &crate::heightfield::Heightfield,
+    o: &mut Out,
+) -> Result<(Simulation, Deviation, Vec<u8>, Vec<u8>), JobError> {
+    let job = &ready.job;
+    let scfg = SimulateConfig {
+        tool: shape,
+        pitch_um: job.simulate.pitch_um,
+        arc_tolerance_um: job.simulate.arc_tolerance_um,
+        machine: Some(ready.machine.clone()),
+        ..Default::default()
+    };
+    let sim = simulate::run(gcode, &scfg).map_err(stage_err("simulate"))?;
+    let dev = simulate::deviation(&sim, design, &shape);
+    sim.heightfield.write_npy(&o.dir.join("sim.npy"))?;
+    o.written.push(o.dir.join("sim.npy"));
+    let sim_png = sim.heightfield.relief_png("simulated milled surface", 1024).to_png();
+    o.write("sim.png", &sim_png)?;
+    let dev_png = dev.to_png("simulated - design", 1024).to_png();
+    o.write("deviation.png", &dev_png)?;
+    o.write(
+        "sim.json",
+        SimFile::new(&sim, &scfg, "program.nc", Some(&dev), Some("tile.npy".into()))
+            .to_json()
+            .as_bytes(),
+    )?;
+    Ok((sim, dev, sim_png, dev_png))
+}
+
+/// The report's figures of the surfaces: design tile, simulated cut, deviation.
+fn surface_figures(
+    ready: &Ready,
+    diameter_mm: &f64,
+    dev: &Deviation,
+    tile_png: Vec<u8>,
+    sim_png: Vec<u8>,
+    dev_png: Vec<u8>,
+) -> Vec<report::Figure> {
+    let job = &ready.job;
+    vec![
+        report::Figure {
+            title: "Design tile".into(),
+            caption: format!(
+                "The periodic facet heightfield ({}×{} facets of {} mm), shaded relief tinted by height.",
+                job.facets.facets_x, job.facets.facets_y, job.facets.facet_mm
+            ),
+            png: tile_png,
+        },
+        report::Figure {
+            title: "Simulated milled surface".into(),
+            caption: format!("The stock after the program, simulated at {} µm.", job.simulate.pitch_um),
+            png: sim_png,
+        },
+        report::Figure {
+            title: "Deviation from the design".into(),
+            caption: format!(
+                "Simulated minus design height. Largest material left {:.2} µm, largest gouge {:.2} µm; {:.2}% of the interior is unreachable for a {} mm ball.",
+                dev.max_over_um,
+                dev.max_under_um,
+                dev.unreachable_fraction * 100.0,
+                diameter_mm
+            ),
+            png: dev_png,
+        },
+    ]
+}
+
+/// The artifact table of the report.
+fn listed(written: &[PathBuf]) -> Vec<(String, String)> {
+    let mut listed: Vec<(String, String)> = written
+        .iter()
+        .map(|p| {
+            (
+                p.file_name()
+                    .map(|n| n.to_string_lossy().to_string())
+                    .unwrap_or_default(),
+                describe(p),
+            )
+        })
+        .collect();
+    listed.push(("report.html".into(), describe(Path::new("report.html"))));
+    listed
+}
+
+fn describe(p: &Path) -> String {
+    match p.file_name().and_then(|n| n.to_str()).unwrap_or("") {
+        "ndf.json" => "target NDF and observed distribution (versioned JSON)",
+        "ndf.png" => "observed and target NDF",
+        "tile.json" => "facet tile: slopes, heights, stats",
+        "tile.npy" => "tile heightfield, mm (NumPy)",
+        "tile.png" => "tile shaded relief",
+        "tile.stl" => "faceted solid of one tile (binary STL, mm)",
+        "program.nc" => "G-code",
+        "program.json" => "G-code summary",
+        "sim.npy" => "simulated milled heightfield, mm (NumPy)",
+        "sim.png" => "simulated surface shaded relief",
+        "deviation.png" => "simulated minus design",
+        "sim.json" => "simulation and deviation statistics",
+        "metrics.json" => "verification metrics and verdict",
+        "wave.png" => "wave (Kirchhoff) and geometric BRDF of a milled patch",
+        "report.html" => "this report",
+        _ => "",
+    }
+    .to_string()
+}

@@ -1,0 +1,100 @@
+//! The report's tables of what was run: the job's parameters and the G-code program's numbers.
+
+use super::Ready;
+use crate::facets::Tile;
+use crate::ndf::Ndf;
+use crate::simulate::Simulation;
+use crate::toolpath::{self, Summary};
+
+/// The parameters table.
+pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) -> Vec<(String, String)> {
+    let job = &ready.job;
+    let tool = ready
+        .machine
+        .tool(&job.toolpath.tool)
+        .map(|t| format!("{} ({} mm ball), stock {:?}", t.id, t.diameter_mm(), job.toolpath.stock))
+        .unwrap_or_else(|e| e);
+    vec![
+        ("target BRDF".into(), n.brdf_spec.clone()),
+        ("base lobe".into(), n.base_spec.clone().unwrap_or_else(|| "none".into())),
+        (
+            "NDF grid".into(),
+            format!("{}² over |p|,|q| ≤ tan {}°", job.ndf.res, job.ndf.max_angle_deg),
+        ),
+        (
+            "deconvolution".into(),
+            format!(
+                "{} iterations ({:?})",
+                n.deconvolution.iterations, n.deconvolution.stopped_by
+            ),
+        ),
+        (
+            "facets".into(),
+            format!(
+                "{}×{} of {} mm at {} µm, seed {}",
+                job.facets.facets_x, job.facets.facets_y, job.facets.facet_mm, job.facets.pitch_um, job.facets.seed
+            ),
+        ),
+        (
+            "arrangement energy".into(),
+            format!(
+                "{:.2}% of random, {} valleys (random {:.0})",
+                100.0 * tile.anneal.energy.total() / tile.anneal.energy_random.total(),
+                tile.anneal.energy.valleys,
+                tile.anneal.energy_random.valleys
+            ),
+        ),
+        (
+            "machine".into(),
+            format!("{} ({})", ready.machine.name, ready.machine_path.display()),
+        ),
+        ("tool".into(), tool),
+        (
+            "area".into(),
+            format!("{} × {} mm", job.toolpath.area_mm[0], job.toolpath.area_mm[1]),
+        ),
+        (
+            "simulation".into(),
+            format!(
+                "{} µm pitch, {} cells",
+                job.simulate.pitch_um,
+                sim.stats.cells[0] * sim.stats.cells[1]
+            ),
+        ),
+    ]
+}
+
+/// The G-code table.
+pub(super) fn program(s: &Summary) -> Vec<(String, String)> {
+    vec![
+        ("lines".into(), s.lines.to_string()),
+        (
+            "stepover".into(),
+            format!("{:.4} mm (scallop {:.3} µm)", s.stepover_mm, s.scallop_um),
+        ),
+        (
+            "passes".into(),
+            format!(
+                "{} finishing, {} roughing layers",
+                s.finishing_passes, s.roughing_layers
+            ),
+        ),
+        (
+            "path".into(),
+            format!("{:.1} mm cutting, {:.1} mm rapid", s.feed_length_mm, s.rapid_length_mm),
+        ),
+        ("estimated time".into(), toolpath::hms(s.estimated_s)),
+        (
+            "feed / spindle".into(),
+            format!("{} mm/min, {} rpm", s.feed_mm_min, s.spindle_rpm),
+        ),
+        (
+            "gouge check".into(),
+            format!(
+                "{} CL points, deepest {:.4} µm below the design",
+                s.checked_points,
+                s.max_gouge_um.max(0.0)
+            ),
+        ),
+    ]
+}
