@@ -3,7 +3,7 @@
 //! Turn a target reflectance (a BRDF) into microgeometry that a 3-axis mill with a ball-nose bit can cut,
 //! then check the result. The method is Weyrich, Peers, Matusik & Rusinkiewicz 2009, "Fabricating
 //! Microgeometry for Custom Surface Reflectance"; equation numbers (Eq. N) refer to the project's reading of
-//! it in `shared/seeds` (Sections 4–7).
+//! it in `docs/DESIGN.md`, which also holds the derivations the code cites (DESIGN.md §N).
 //!
 //! The pipeline, one module per stage, data flowing one way:
 //!
@@ -19,6 +19,8 @@
 //! slope `(p, q) = (-mx/mz, -my/mz)`; the slope density `P22(p, q)` integrates to 1 over the slope plane and
 //! relates to the NDF by `D(wm) = P22(p, q) / cos⁴θm`.
 #![warn(missing_docs)]
+#![forbid(unsafe_code)]
+#![deny(rustdoc::broken_intra_doc_links)]
 
 pub mod analyze;
 pub mod brdf;

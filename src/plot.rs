@@ -4,13 +4,44 @@
 //! fonts need no font files on the user's machine); colour maps from `colorous`; PNG encoding from `png`.
 
 use embedded_graphics::{
-    mono_font::{iso_8859_1::FONT_6X10, MonoTextStyle},
+    mono_font::{iso_8859_1::FONT_6X10, iso_8859_7::FONT_6X10 as GREEK_6X10, MonoTextStyle},
     pixelcolor::Rgb888,
     prelude::*,
     primitives::{Line, PrimitiveStyle, Rectangle},
     text::{Alignment, Text},
 };
 use std::path::Path;
+
+/// Greek letters, which the ISO 8859-7 font draws.
+fn is_greek(c: char) -> bool {
+    ('\u{0391}'..='\u{03C9}').contains(&c)
+}
+
+/// Text as the bitmap fonts can draw it: Latin-1 and Greek letters as they are, the mathematical signs of
+/// the figures' titles spelt in ASCII (`−` → `-`, `⊛` → `*`, `≤` → `<=`, …), anything else as `?`.
+#[must_use]
+pub fn glyph_text(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            c if u32::from(c) <= 0xFF || is_greek(c) => out.push(c),
+            '−' | '–' | '—' => out.push('-'),
+            '⊛' | '∗' | '⋆' => out.push('*'),
+            '≤' => out.push_str("<="),
+            '≥' => out.push_str(">="),
+            '≈' | '∼' => out.push('~'),
+            '→' => out.push_str("->"),
+            '←' => out.push_str("<-"),
+            '…' => out.push_str("..."),
+            '‘' | '’' | '′' => out.push('\''),
+            '“' | '”' | '″' => out.push('"'),
+            '∞' => out.push_str("inf"),
+            '√' => out.push_str("sqrt"),
+            _ => out.push('?'),
+        }
+    }
+    out
+}
 
 /// An RGB image being drawn.
 #[derive(Clone, Debug)]
@@ -66,10 +97,28 @@ impl Canvas {
         }
     }
 
-    /// Draw text with its anchor at `(x, y)` (baseline), aligned left, centre or right.
+    /// Draw text with its anchor at `(x, y)` (baseline), aligned left, centre or right. Latin-1 characters
+    /// come from the ISO 8859-1 bitmap font, Greek letters from its ISO 8859-7 sibling (the same 6×10 cell),
+    /// and the few mathematical signs neither has are spelt in ASCII ([`glyph_text`]).
     pub fn text(&mut self, x: i32, y: i32, s: &str, align: Alignment) {
-        let style = MonoTextStyle::new(&FONT_6X10, BLACK);
-        Text::with_alignment(s, Point::new(x, y), style, align).draw(self).ok();
+        let s = glyph_text(s);
+        let n = s.chars().count() as i32;
+        let w = FONT_6X10.character_size.width as i32;
+        let left = match align {
+            Alignment::Left => x,
+            Alignment::Center => x - n * w / 2,
+            Alignment::Right => x - n * w,
+        };
+        let latin = MonoTextStyle::new(&FONT_6X10, BLACK);
+        let greek = MonoTextStyle::new(&GREEK_6X10, BLACK);
+        let mut buf = [0u8; 4];
+        for (k, c) in s.chars().enumerate() {
+            let style = if is_greek(c) { greek } else { latin };
+            let p = Point::new(left + k as i32 * w, y);
+            Text::with_alignment(c.encode_utf8(&mut buf), p, style, Alignment::Left)
+                .draw(self)
+                .ok();
+        }
     }
 
     /// A one-pixel black line.
@@ -310,6 +359,25 @@ impl Heatmap<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn every_title_sign_has_a_glyph() {
+        assert_eq!(glyph_text("design tile ⊛ base lobe"), "design tile * base lobe");
+        assert_eq!(glyph_text("sim − design (µm)"), "sim - design (µm)");
+        assert_eq!(glyph_text("f·cosθo, θo (degrees)"), "f·cosθo, θo (degrees)");
+        // The ISO 8859-7 font maps θ to a glyph of its own, not to the replacement glyph.
+        let replacement = GREEK_6X10.glyph_mapping.index('?');
+        for c in ['θ', 'φ', 'α', 'σ', 'λ', 'ψ', 'ξ'] {
+            assert_ne!(GREEK_6X10.glyph_mapping.index(c), replacement, "{c}");
+        }
+        for c in ['µ', '²', '×', '·', '°', '±'] {
+            assert_ne!(
+                FONT_6X10.glyph_mapping.index(c),
+                FONT_6X10.glyph_mapping.index('?'),
+                "{c}"
+            );
+        }
+    }
 
     #[test]
     fn ticks_are_nice_and_inside() {

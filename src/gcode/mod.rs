@@ -5,15 +5,18 @@
 //! - [`modal`]: the modal state between blocks (units, distance modes, plane, motion, feed, spindle);
 //! - [`moves`]: the machine-independent move list that `toolpath` produces, the checker and time estimator
 //!   read, the emitter writes and the simulator's reader returns;
-//! - [`emit`]: the modal writer of a move list for a controller [`Dialect`].
+//! - [`emit`]: the modal writer of a move list for a controller [`Dialect`];
+//! - [`program`]: a program file annotated line by line (cleaned block, modal state and tool position before
+//!   and after each line, GRBL's line limits): what the streamer sends and resumes from.
 //!
-//! Readers built on these: `simulate::gcode` (any program → straight segments, refusing what it does not
-//! understand) and `stream::program` (a program annotated line by line for streaming and resume).
+//! The simulator's reader, `simulate::gcode`, builds on [`lex`] and [`modal`]: any program → straight
+//! segments, refusing what it does not understand with the line and column.
 
 pub mod emit;
 pub mod lex;
 pub mod modal;
 pub mod moves;
+pub mod program;
 
 use serde::{Deserialize, Serialize};
 

@@ -9,7 +9,7 @@
 //! The slope plane is not periodic, so convolutions are linear: the grid is zero-padded to at least
 //! `n + m` per axis (`m` the kernel half-width), the kernel is stored centred at index 0 with wrap-around, so
 //! the output needs no shift and the mirrored kernel's spectrum is the complex conjugate. The FFTs are
-//! [`RealFft2`](crate::fft2::RealFft2), planned once.
+//! [`crate::fft2::RealFft2`], planned once.
 
 use crate::fft2::RealFft2;
 use rayon::prelude::*;

@@ -5,7 +5,7 @@
 //!    distribution that, blurred by the material, shows `O`.
 //! 3. The mean slope removed (Section 7.2: a tileable surface has zero mean slope), and reported.
 //!
-//! The result is an [`Ndf`], saved as `ndf.json` ([`format`]) and drawn as a PNG.
+//! The result is an [`Ndf`], saved as `ndf.json` ([`format`](mod@format)) and drawn as a PNG.
 //!
 //! ```
 //! use brdfmill::{brdf::Brdf, ndf};

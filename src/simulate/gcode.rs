@@ -96,9 +96,10 @@ impl Default for ParseOptions {
     }
 }
 
-/// A program read into linear segments (mm) and the machine-independent move list of the time estimator.
+/// A program read into its motion: linear segments (mm) for the sweep and the machine-independent move list
+/// of the time estimator.
 #[derive(Clone, Debug, Default, PartialEq)]
-pub struct Program {
+pub struct Motion {
     /// Every motion as straight segments, in program order (zero-length moves dropped).
     pub segments: Vec<Segment>,
     /// The same motion (arcs as their chords) with feeds in mm/min, spindle and dwell commands, for
@@ -184,7 +185,7 @@ fn tokenize(raw: &str, lineno: usize) -> Result<Block, GcodeError> {
 }
 
 /// Read a whole program.
-pub fn parse(text: &str, opt: &ParseOptions) -> Result<Program, GcodeError> {
+pub fn parse(text: &str, opt: &ParseOptions) -> Result<Motion, GcodeError> {
     let mut st = State {
         pos: opt.start_mm,
         // LinuxCNC's standalone interpreter starts with no motion mode: coordinates before a G0/G1/G2/G3
@@ -196,7 +197,7 @@ pub fn parse(text: &str, opt: &ParseOptions) -> Result<Program, GcodeError> {
         cut_yet: false,
         tool_changed: false,
     };
-    let mut prog = Program::default();
+    let mut prog = Motion::default();
     let mut percents = 0;
     let mut seen_content = false;
     for (n, raw) in text.lines().enumerate() {
@@ -330,13 +331,7 @@ fn sort_words(w: &[Word], lineno: usize) -> Result<Words, GcodeError> {
 
 /// Execute one block in the order of RS274/NGC (F, S, T, M6, spindle, coolant, dwell, modes, motion, stop).
 /// Returns true when the block ends the program.
-fn block(
-    w: &[Word],
-    lineno: usize,
-    st: &mut State,
-    prog: &mut Program,
-    opt: &ParseOptions,
-) -> Result<bool, GcodeError> {
+fn block(w: &[Word], lineno: usize, st: &mut State, prog: &mut Motion, opt: &ParseOptions) -> Result<bool, GcodeError> {
     let w = sort_words(w, lineno)?;
     feeds_and_tools(&w, lineno, st, prog)?;
     dwell(&w, lineno, st, prog)?;
@@ -346,7 +341,7 @@ fn block(
 }
 
 /// F, S, T and M6, spindle on/off.
-fn feeds_and_tools(w: &Words, lineno: usize, st: &mut State, prog: &mut Program) -> Result<(), GcodeError> {
+fn feeds_and_tools(w: &Words, lineno: usize, st: &mut State, prog: &mut Motion) -> Result<(), GcodeError> {
     let err = |col: usize, message: String| at(lineno, col, message);
     if let Some((f, col)) = w.get('F') {
         if f < 0.0 {
@@ -389,7 +384,7 @@ fn feeds_and_tools(w: &Words, lineno: usize, st: &mut State, prog: &mut Program)
 }
 
 /// `P` and `Q` belong to G4, G64 or an arc; G4 dwells.
-fn dwell(w: &Words, lineno: usize, st: &State, prog: &mut Program) -> Result<(), GcodeError> {
+fn dwell(w: &Words, lineno: usize, st: &State, prog: &mut Motion) -> Result<(), GcodeError> {
     let err = |col: usize, message: String| at(lineno, col, message);
     let motion_here =
         w.gs.iter()
@@ -424,7 +419,7 @@ fn dwell(w: &Words, lineno: usize, st: &State, prog: &mut Program) -> Result<(),
 }
 
 /// Units and distance modes.
-fn modes(w: &Words, st: &mut State, prog: &mut Program) {
+fn modes(w: &Words, st: &mut State, prog: &mut Motion) {
     let m = &mut st.modal;
     for &(t, _) in &w.gs {
         match t {
@@ -443,7 +438,7 @@ fn modes(w: &Words, st: &mut State, prog: &mut Program) {
 }
 
 /// The block's motion, if it has coordinates.
-fn motion(w: &Words, lineno: usize, st: &mut State, prog: &mut Program, opt: &ParseOptions) -> Result<(), GcodeError> {
+fn motion(w: &Words, lineno: usize, st: &mut State, prog: &mut Motion, opt: &ParseOptions) -> Result<(), GcodeError> {
     let err = |col: usize, message: String| at(lineno, col, message);
     let mut motion_col = None;
     for &(t, col) in &w.gs {
@@ -523,7 +518,7 @@ fn motion(w: &Words, lineno: usize, st: &mut State, prog: &mut Program, opt: &Pa
     Ok(())
 }
 
-fn push_line(prog: &mut Program, from: P3, to: P3, kind: SegmentKind, line: usize, feed: Option<f64>) {
+fn push_line(prog: &mut Motion, from: P3, to: P3, kind: SegmentKind, line: usize, feed: Option<f64>) {
     if from == to {
         return;
     }
@@ -544,7 +539,7 @@ fn push_line(prog: &mut Program, from: P3, to: P3, kind: SegmentKind, line: usiz
 /// difference); z varies linearly with the angle (a helix). Errors carry (0-based column, message).
 #[allow(clippy::too_many_arguments)]
 fn arc(
-    prog: &mut Program,
+    prog: &mut Motion,
     st: &State,
     get: &dyn Fn(char) -> Option<(f64, usize)>,
     target: P3,
@@ -659,7 +654,7 @@ fn arc(
 mod tests {
     use super::*;
 
-    fn p(text: &str) -> Result<Program, GcodeError> {
+    fn p(text: &str) -> Result<Motion, GcodeError> {
         parse(text, &ParseOptions::default())
     }
 

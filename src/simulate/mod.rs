@@ -5,7 +5,7 @@
 //! - [`sweep`]: the lowest point of a ball, flat or bull bit swept along one straight segment, in closed form
 //!   for ball and flat (a certified 1 pm bound for the bull).
 //! - [`stock`]: the stock heightfield in tiles, swept in parallel with rayon, each tile owned by one task.
-//! - [`deviation`]: the simulated surface against the design tile, and where the bit cannot reach.
+//! - [`deviation`](mod@deviation): the simulated surface against the design tile, and where the bit cannot reach.
 //!
 //! The stock is a non-periodic grid of `pitch_um` over the program's cutting extents plus the tool radius
 //! (or given bounds), flat at `stock_top_mm`; every segment lowers it to `min(stock, sweep)` at each cell
@@ -35,7 +35,7 @@ use crate::gcode::moves::P3;
 use crate::heightfield::Heightfield;
 pub use crate::tool::Shape;
 use crate::toolpath::machine::Machine;
-use gcode::{ParseOptions, Program};
+use gcode::{Motion, ParseOptions};
 use serde::{Deserialize, Serialize};
 
 /// Configuration of the simulation. Lengths carry their unit in the name.
@@ -279,7 +279,7 @@ pub fn run(program: &str, cfg: &SimulateConfig) -> Result<Simulation, SimulateEr
 
 /// The stock grid of a program under a configuration (bounds given, or the cutting extents plus the tool
 /// radius on multiples of the pitch), checked against the cell limit.
-pub fn stock_grid(prog: &Program, cfg: &SimulateConfig) -> Result<stock::Grid, SimulateError> {
+pub fn stock_grid(prog: &Motion, cfg: &SimulateConfig) -> Result<stock::Grid, SimulateError> {
     let p = cfg.pitch_um * 1e-3;
     let r = cfg.tool.radius_mm();
     let (x0, y0, x1, y1) = match cfg.bounds_mm {
@@ -339,7 +339,7 @@ pub fn stock_grid(prog: &Program, cfg: &SimulateConfig) -> Result<stock::Grid, S
 }
 
 /// Simulate a program already read.
-pub fn simulate(prog: &Program, cfg: &SimulateConfig) -> Result<Simulation, SimulateError> {
+pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, SimulateError> {
     cfg.validate()?;
     if cfg.flute_length_mm > 0.0 {
         let floor = cfg.stock_top_mm - cfg.flute_length_mm;

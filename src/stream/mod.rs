@@ -11,7 +11,8 @@
 
 pub mod emulator;
 pub mod journal;
-pub mod program;
+/// The program model the streamer reads (the crate's one annotated G-code program, [`crate::gcode::program`]).
+pub use crate::gcode::program;
 pub mod protocol;
 pub mod serial;
 pub mod session;

@@ -4,7 +4,7 @@
 //! - [`dropcutter`]: the exact cutter-location surface of a ball (or flat) bit over a heightfield.
 //! - [`raster`]: raster passes at any angle over the tile repeated across the work area.
 //! - [`simplify`]: one-sided removal of collinear points within a stated tolerance.
-//! - [`check`], [`estimate`], [`gcode`]: the machine check, the run-time estimate and the modal emitter.
+//! - [`check`], [`estimate`]: the machine check and the run-time estimate; the program is written by [`crate::gcode::emit`].
 //!
 //! The program cuts roughing layers first when the design is deeper than the tool's depth of cut
 //! (z = max(layer, CL_rough + leave)), then the finishing raster at the stepover of the target scallop.
@@ -20,7 +20,7 @@ use crate::gcode::emit;
 use crate::gcode::moves::{self, Move, P3};
 use crate::heightfield::Heightfield;
 use crate::tool::Shape;
-use machine::{Machine, Stock};
+use machine::{Machine, Stock, Tool};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -125,7 +125,7 @@ pub struct Summary {
 }
 
 /// A finished program.
-pub struct Program {
+pub struct Toolpath {
     /// The moves.
     pub moves: Vec<Move>,
     /// The G-code text.
@@ -182,8 +182,17 @@ impl Builder {
     }
 }
 
-/// Build the program for `tile` (periodic, repeated over the area) on `machine`.
-pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Result<Program, ToolpathError> {
+/// The checked inputs of one program.
+struct Plan<'a> {
+    tool: &'a Tool,
+    rough: &'a Tool,
+    area: (f64, f64),
+    stepover: f64,
+    feed: f64,
+}
+
+/// Check the configuration against the machine and the tile; choose the tools and the stepover.
+fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> Result<Plan<'a>, ToolpathError> {
     let bad = |s: String| Err(ToolpathError::Config(s));
     let tool = machine.tool(&cfg.tool).map_err(ToolpathError::Config)?;
     if !matches!(tool.shape, Shape::Ball { .. }) {
@@ -232,30 +241,159 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
     } else {
         cut.feed_mm_min
     };
-    let rough_cut = rough.cutting(cfg.stock);
-    let finish_cutter = tool.shape;
-    let rough_cutter = rough.shape.normalized();
-    let margin = r.max(rough.radius_mm()) + 3.0 * tile.pitch_mm;
-    let design = raster::RotatedDesign::new(tile, (ax, ay), cfg.angle_deg, margin);
-    let (vmin, vmax) = design.v_range();
-    let tol = cfg.tolerance_um * 1e-3;
+    Ok(Plan {
+        tool,
+        rough,
+        area: (ax, ay),
+        stepover,
+        feed,
+    })
+}
 
-    // Finishing CL passes (in parallel), simplified one-sidedly.
-    let dc = design.cutter(finish_cutter);
+/// The finishing CL passes (in parallel), simplified one-sidedly, with the depth of the raw CL surface and
+/// the independent gouge check by direct summation: `(passes, depth_mm, checked points, max gouge mm)`.
+fn finishing_passes(
+    design: &raster::RotatedDesign,
+    dc: &dropcutter::DropCutter,
+    stepover: f64,
+    tol: f64,
+) -> (Vec<Vec<P3>>, f64, usize, f64) {
+    let (vmin, vmax) = design.v_range();
     let vs = raster::pass_positions(vmin, vmax, stepover);
-    let raw: Vec<Vec<P3>> = vs.par_iter().map(|v| design.pass(&dc, *v, |z| z)).collect();
+    let raw: Vec<Vec<P3>> = vs.par_iter().map(|v| design.pass(dc, *v, |z| z)).collect();
     let depth = -raw.iter().flatten().map(|p| p[2]).fold(f64::INFINITY, f64::min);
     let finishing: Vec<Vec<P3>> = raw.par_iter().map(|pts| simplify::simplify(pts, tol)).collect();
-    // Independent check by direct summation: every point up to 50,000, an even stride through them beyond.
+    // Every point up to 50,000, an even stride through them beyond.
     let all: Vec<P3> = finishing.iter().flatten().copied().collect();
     let stride = all.len().div_ceil(50_000).max(1);
     let checked: Vec<P3> = all.iter().step_by(stride).copied().collect();
-    drop(all);
     let max_gouge = checked
         .par_iter()
-        .map(|p| design.cl_at(&dc, p[0], p[1]) - p[2])
+        .map(|p| design.cl_at(dc, p[0], p[1]) - p[2])
         .reduce(|| f64::NEG_INFINITY, f64::max);
-    drop(raw);
+    (finishing, depth, checked.len(), max_gouge)
+}
+
+/// Roughing layers at the roughing tool's depth of cut while the design is deeper than one cut; returns
+/// the number of layers.
+fn roughing(
+    b: &mut Builder,
+    design: &raster::RotatedDesign,
+    rough: &Tool,
+    rough_cut: &machine::CuttingData,
+    depth: f64,
+    tol: f64,
+) -> usize {
+    let mut layers = 0;
+    if depth <= rough_cut.max_depth_of_cut_mm {
+        return 0;
+    }
+    let (vmin, vmax) = design.v_range();
+    let leave = rough_cut.max_depth_of_cut_mm / 3.0;
+    let rough_cutter = rough.shape.normalized();
+    let rs = match rough_cutter {
+        Shape::Ball { diameter_mm } => raster::stepover_for_scallop(diameter_mm / 2.0, leave).min(0.8 * diameter_mm),
+        Shape::Flat { diameter_mm } => diameter_mm / 2.0,
+        // the flat part overlaps, the corners leave a ball's scallop between them
+        Shape::Bull {
+            diameter_mm,
+            corner_radius_mm: rc,
+        } => (diameter_mm - 2.0 * rc + raster::stepover_for_scallop(rc, leave)).min(0.8 * diameter_mm),
+    };
+    let rdc = design.cutter(rough_cutter);
+    let rvs = raster::pass_positions(vmin, vmax, rs);
+    let rows: Vec<Vec<P3>> = rvs.par_iter().map(|v| design.pass(&rdc, *v, |z| z + leave)).collect();
+    let floor = rows.iter().flatten().map(|p| p[2]).fold(f64::INFINITY, f64::min);
+    let mut z_layer = 0.0;
+    while z_layer > floor {
+        z_layer -= rough_cut.max_depth_of_cut_mm;
+        layers += 1;
+        b.moves.push(Move::Comment("roughing layer"));
+        let zl = z_layer;
+        let mut first = true;
+        for (k, row) in rows.iter().enumerate() {
+            let mut pts: Vec<P3> = row.iter().map(|p| [p[0], p[1], p[2].max(zl)]).collect();
+            if k % 2 == 1 {
+                pts.reverse();
+            }
+            let pts = simplify::simplify(&pts, tol);
+            if pts.is_empty() {
+                continue; // a pass that misses the area (corners of a rotated raster)
+            }
+            if first {
+                b.approach(pts[0]);
+                first = false;
+            } else {
+                let link = link_points(design, &rdc, b.at, pts[0], |z| (z + leave).max(zl));
+                b.path(&simplify::simplify(&link, tol), rough_cut.feed_mm_min);
+            }
+            b.path(&pts[1..], rough_cut.feed_mm_min);
+        }
+    }
+    layers
+}
+
+/// The finishing raster, then the retract to safe z and the spindle off.
+#[allow(clippy::too_many_arguments)]
+fn finishing(
+    b: &mut Builder,
+    design: &raster::RotatedDesign,
+    dc: &dropcutter::DropCutter,
+    passes: &[Vec<P3>],
+    strategy: Strategy,
+    feed: f64,
+    tol: f64,
+) {
+    b.moves.push(Move::Comment("finishing"));
+    let mut first = true;
+    for (k, pass) in passes.iter().enumerate() {
+        if pass.is_empty() {
+            continue;
+        }
+        let pts: Vec<P3> = match strategy {
+            Strategy::Zigzag if k % 2 == 1 => pass.iter().rev().copied().collect(),
+            Strategy::Zigzag => pass.clone(),
+            // one-way passes run in −u so that the uncut side (+v) is on the right: climb for M3
+            Strategy::Oneway => pass.iter().rev().copied().collect(),
+        };
+        if first || strategy == Strategy::Oneway {
+            b.approach(pts[0]);
+            first = false;
+        } else {
+            let link = link_points(design, dc, b.at, pts[0], |z| z);
+            b.path(&simplify::simplify(&link, tol), feed);
+        }
+        b.path(&pts[1..], feed);
+        if strategy == Strategy::Oneway {
+            let up = [b.at[0], b.at[1], LEAD_MM.max(b.at[2])];
+            let f = b.plunge;
+            b.feed(up, f);
+        }
+    }
+    let up = [b.at[0], b.at[1], LEAD_MM.max(b.at[2])];
+    let f = b.plunge;
+    b.feed(up, f);
+    b.rapid([b.at[0], b.at[1], b.safe_z]);
+    b.moves.push(Move::SpindleOff);
+}
+
+/// Build the program for `tile` (periodic, repeated over the area) on `machine`.
+pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Result<Toolpath, ToolpathError> {
+    let Plan {
+        tool,
+        rough,
+        area: (ax, ay),
+        stepover,
+        feed,
+    } = plan(cfg, tile, machine)?;
+    let r = tool.radius_mm();
+    let cut = tool.cutting(cfg.stock);
+    let rough_cut = rough.cutting(cfg.stock);
+    let margin = r.max(rough.radius_mm()) + 3.0 * tile.pitch_mm;
+    let design = raster::RotatedDesign::new(tile, (ax, ay), cfg.angle_deg, margin);
+    let tol = cfg.tolerance_um * 1e-3;
+    let dc = design.cutter(tool.shape);
+    let (passes, depth, checked_points, max_gouge) = finishing_passes(&design, &dc, stepover, tol);
 
     let mut b = Builder {
         moves: vec![],
@@ -269,86 +407,8 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         .push(Move::SpindleOn(cut.spindle_rpm.max(rough_cut.spindle_rpm)));
     b.moves.push(Move::Dwell(machine.program.spindle_dwell_s));
     b.rapid(start);
-
-    // Roughing layers when the design is deeper than one cut.
-    let mut layers = 0;
-    if depth > rough_cut.max_depth_of_cut_mm {
-        let leave = rough_cut.max_depth_of_cut_mm / 3.0;
-        let rs = match rough_cutter {
-            Shape::Ball { diameter_mm } => {
-                raster::stepover_for_scallop(diameter_mm / 2.0, leave).min(0.8 * diameter_mm)
-            }
-            Shape::Flat { diameter_mm } => diameter_mm / 2.0,
-            // the flat part overlaps, the corners leave a ball's scallop between them
-            Shape::Bull {
-                diameter_mm,
-                corner_radius_mm: rc,
-            } => (diameter_mm - 2.0 * rc + raster::stepover_for_scallop(rc, leave)).min(0.8 * diameter_mm),
-        };
-        let rdc = design.cutter(rough_cutter);
-        let rvs = raster::pass_positions(vmin, vmax, rs);
-        let rows: Vec<Vec<P3>> = rvs.par_iter().map(|v| design.pass(&rdc, *v, |z| z + leave)).collect();
-        let floor = rows.iter().flatten().map(|p| p[2]).fold(f64::INFINITY, f64::min);
-        let mut z_layer = 0.0;
-        while z_layer > floor {
-            z_layer -= rough_cut.max_depth_of_cut_mm;
-            layers += 1;
-            b.moves.push(Move::Comment("roughing layer"));
-            let zl = z_layer;
-            let mut first = true;
-            for (k, row) in rows.iter().enumerate() {
-                let mut pts: Vec<P3> = row.iter().map(|p| [p[0], p[1], p[2].max(zl)]).collect();
-                if k % 2 == 1 {
-                    pts.reverse();
-                }
-                let pts = simplify::simplify(&pts, tol);
-                if pts.is_empty() {
-                    continue; // a pass that misses the area (corners of a rotated raster)
-                }
-                if first {
-                    b.approach(pts[0]);
-                    first = false;
-                } else {
-                    let link = link_points(&design, &rdc, b.at, pts[0], |z| (z + leave).max(zl));
-                    b.path(&simplify::simplify(&link, tol), rough_cut.feed_mm_min);
-                }
-                b.path(&pts[1..], rough_cut.feed_mm_min);
-            }
-        }
-    }
-
-    // Finishing.
-    b.moves.push(Move::Comment("finishing"));
-    let mut first = true;
-    for (k, pass) in finishing.iter().enumerate() {
-        if pass.is_empty() {
-            continue;
-        }
-        let pts: Vec<P3> = match cfg.strategy {
-            Strategy::Zigzag if k % 2 == 1 => pass.iter().rev().copied().collect(),
-            Strategy::Zigzag => pass.clone(),
-            // one-way passes run in −u so that the uncut side (+v) is on the right: climb for M3
-            Strategy::Oneway => pass.iter().rev().copied().collect(),
-        };
-        if first || cfg.strategy == Strategy::Oneway {
-            b.approach(pts[0]);
-            first = false;
-        } else {
-            let link = link_points(&design, &dc, b.at, pts[0], |z| z);
-            b.path(&simplify::simplify(&link, tol), feed);
-        }
-        b.path(&pts[1..], feed);
-        if cfg.strategy == Strategy::Oneway {
-            let up = [b.at[0], b.at[1], LEAD_MM.max(b.at[2])];
-            let f = b.plunge;
-            b.feed(up, f);
-        }
-    }
-    let up = [b.at[0], b.at[1], LEAD_MM.max(b.at[2])];
-    let f = b.plunge;
-    b.feed(up, f);
-    b.rapid([b.at[0], b.at[1], b.safe_z]);
-    b.moves.push(Move::SpindleOff);
+    let layers = roughing(&mut b, &design, rough, rough_cut, depth, tol);
+    finishing(&mut b, &design, &dc, &passes, cfg.strategy, feed, tol);
     let moves = b.moves;
 
     check::check(&moves, start, machine, rough).map_err(ToolpathError::Machine)?;
@@ -397,16 +457,16 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         estimated_s: est,
         stepover_mm: stepover,
         scallop_um: scallop,
-        finishing_passes: finishing.len(),
+        finishing_passes: passes.len(),
         roughing_layers: layers,
         depth_mm: depth,
         extents_mm: [lo, hi],
-        checked_points: checked.len(),
+        checked_points,
         max_gouge_um: max_gouge * 1000.0,
         feed_mm_min: feed,
         spindle_rpm: cut.spindle_rpm,
     };
-    Ok(Program { moves, gcode, summary })
+    Ok(Toolpath { moves, gcode, summary })
 }
 
 /// Points along the straight link from `a` to `b` every pitch, at the CL surface mapped by `zmap`, ending at

@@ -1,4 +1,4 @@
-//! A G-code program as the streamer sees it: every line cleaned the way GRBL cleans it (comments and
+//! A G-code program annotated line by line, as the streamer sees it: every line cleaned the way GRBL cleans it (comments and
 //! whitespace removed, letters upper-cased), classified (G-code, settings write, other `$` command), and
 //! annotated with the modal state and the tool position before and after it.
 //!
@@ -232,6 +232,14 @@ impl Program {
                 what,
                 text: (*s).to_string(),
             };
+            // A control character in a line is never G-code: it is a corrupted file or text injected into it
+            // (GRBL would drop it silently and run the rest of the line).
+            if let Some(c) = s.chars().find(|c| c.is_control() && *c != '\t' && *c != '\r') {
+                return Err(syntax(format!(
+                    "control character U+{:04X}: a program line holds printable text only",
+                    u32::from(c)
+                )));
+            }
             let cleaned = clean(s);
             let (kind, block) = if cleaned.is_empty() {
                 (LineKind::Empty, cleaned)
@@ -502,6 +510,15 @@ mod tests {
         assert_eq!(p.lines[2].kind, LineKind::Setting);
         assert_eq!(p.lines[3].kind, LineKind::System);
         assert!(p.lines[3].breaks_position);
+    }
+
+    #[test]
+    fn control_characters_are_refused_with_the_line() {
+        for bad in ["G0 X1\u{7}\n", "G0 X1\n(evil\u{8}G0 Z-40)\n", "G1 X1\u{1b}[2J F100\n"] {
+            let e = Program::parse(Path::new("p.nc"), bad, 0, true).unwrap_err();
+            assert!(e.to_string().contains("control character"), "{bad:?}: {e}");
+        }
+        assert!(Program::parse(Path::new("p.nc"), "G0 X1\t(tab)\r\n", 0, true).is_ok());
     }
 
     #[test]
