@@ -1,9 +1,39 @@
-//! Atomic file output: every artifact is written to a temporary file beside its destination and renamed
-//! into place, so a failure never leaves a half-written file under the final name.
+//! File input and output shared by every reader and writer: one error type for a file that cannot be read
+//! ([`ReadError`]) and one for a file that cannot be written ([`WriteError`]), and atomic output — every
+//! artifact is written to a temporary file beside its destination and renamed into place, so a failure never
+//! leaves a half-written file under the final name. Artifacts get the user's usual permissions (`0666` less
+//! the umask), not the temporary file's private `0600`.
 
 use std::fs;
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+/// An input file could not be opened or read.
+#[derive(Debug, thiserror::Error)]
+#[error("cannot read {path}")]
+pub struct ReadError {
+    /// The file.
+    pub path: PathBuf,
+    /// The underlying I/O error.
+    #[source]
+    pub source: std::io::Error,
+}
+
+/// Read a whole file.
+pub fn read(path: &Path) -> Result<Vec<u8>, ReadError> {
+    fs::read(path).map_err(|source| ReadError {
+        path: path.to_path_buf(),
+        source,
+    })
+}
+
+/// Read a whole text file (UTF-8).
+pub fn read_to_string(path: &Path) -> Result<String, ReadError> {
+    fs::read_to_string(path).map_err(|source| ReadError {
+        path: path.to_path_buf(),
+        source,
+    })
+}
 
 /// An output file could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -37,11 +67,15 @@ where
         _ => PathBuf::from("."),
     };
     fs::create_dir_all(&dir).map_err(err)?;
-    let mut tmp = tempfile::Builder::new()
-        .prefix(".brdfmill-")
-        .suffix(".tmp")
-        .tempfile_in(&dir)
-        .map_err(err)?;
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".brdfmill-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        // the mode asked for at creation; the kernel applies the umask, as for any file the user creates
+        builder.permissions(fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp = builder.tempfile_in(&dir).map_err(err)?;
     {
         let mut w = std::io::BufWriter::new(tmp.as_file_mut());
         fill(&mut w).map_err(err)?;
@@ -55,6 +89,20 @@ where
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[cfg(unix)]
+    #[test]
+    fn artifacts_are_not_private_to_the_owner() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.txt");
+        write_atomic(&p, b"x").unwrap();
+        let mode = fs::metadata(&p).unwrap().permissions().mode() & 0o777;
+        // whatever the umask, the owner can read and write, and a umask that allows it lets others read:
+        // the test runner's umask is 022 or 002 here, so group and others can read
+        assert_eq!(mode & 0o600, 0o600);
+        assert_ne!(mode & 0o044, 0, "mode {mode:o}");
+    }
 
     #[test]
     fn failed_fill_leaves_nothing() {

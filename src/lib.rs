@@ -2,8 +2,9 @@
 //!
 //! Turn a target reflectance (a BRDF) into microgeometry that a 3-axis mill with a ball-nose bit can cut,
 //! then check the result. The method is Weyrich, Peers, Matusik & Rusinkiewicz 2009, "Fabricating
-//! Microgeometry for Custom Surface Reflectance"; equation numbers (Eq. N) refer to the project's reading of
-//! it in `docs/DESIGN.md`, which also holds the derivations the code cites (DESIGN.md §N).
+//! Microgeometry for Custom Surface Reflectance" (ACM TOG 28(3), DOI 10.1145/1531326.1531338). Equation
+//! numbers (Eq. N) follow the restatement the project reads it in; `docs/DESIGN.md` says which equation is
+//! which and holds every derivation the code cites (`DESIGN.md §N`).
 //!
 //! The pipeline, one module per stage, data flowing one way:
 //!

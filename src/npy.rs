@@ -6,15 +6,9 @@ use std::path::Path;
 /// A `.npy` file that could not be read as a 2D `f64` array.
 #[derive(Debug, thiserror::Error)]
 pub enum NpyError {
-    /// Could not open or read the file.
-    #[error("cannot read {path}")]
-    Io {
-        /// The file.
-        path: std::path::PathBuf,
-        /// The I/O error.
-        #[source]
-        source: std::io::Error,
-    },
+    /// A file could not be opened or read.
+    #[error(transparent)]
+    Io(#[from] crate::io::ReadError),
     /// Not a 2D little-endian float64 C-order array.
     #[error("{path}: {reason}")]
     Format {
@@ -41,10 +35,7 @@ pub fn write_f64_2d(path: &Path, rows: usize, cols: usize, data: &[f64]) -> Resu
 
 /// Read a 2D `f64` array (C order); returns `(rows, cols, data)`.
 pub fn read_f64_2d(path: &Path) -> Result<(usize, usize, Vec<f64>), NpyError> {
-    let bytes = std::fs::read(path).map_err(|source| NpyError::Io {
-        path: path.to_path_buf(),
-        source,
-    })?;
+    let bytes = crate::io::read(path)?;
     let fmt = |reason: String| NpyError::Format {
         path: path.to_path_buf(),
         reason,

@@ -15,7 +15,7 @@ use std::fmt;
 
 /// A tool whose dimensions are not a tool: the field and the value.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
-#[error("{field} must be {expected}, got {value}")]
+#[error("{field}: expected {expected}, got {value}")]
 pub struct ShapeError {
     /// The field (`diameter_mm`, `corner_radius_mm`, or the spec text).
     pub field: String,

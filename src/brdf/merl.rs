@@ -70,9 +70,11 @@ fn bin_centre(th: usize, td: usize, pd: usize) -> (f64, f64, f64) {
 impl Merl {
     /// Read a `.binary` file. A wrong header, a wrong size or a non-finite value is an error naming the file.
     pub fn read(path: &Path) -> Result<Self, BrdfError> {
-        let io = |source| BrdfError::Io {
-            path: path.to_path_buf(),
-            source,
+        let io = |source| {
+            BrdfError::Io(crate::io::ReadError {
+                path: path.to_path_buf(),
+                source,
+            })
         };
         let fmt = |reason: String| BrdfError::Format {
             path: path.to_path_buf(),

@@ -46,15 +46,9 @@ pub enum BrdfError {
         /// What was wrong and what was expected.
         reason: String,
     },
-    /// A data file could not be opened or read.
-    #[error("cannot read {path}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The I/O error.
-        #[source]
-        source: std::io::Error,
-    },
+    /// A file could not be opened or read.
+    #[error(transparent)]
+    Io(#[from] crate::io::ReadError),
     /// A data file is not in the expected format.
     #[error("{path}: {reason}")]
     Format {

@@ -262,10 +262,7 @@ fn param_weights(v: &[f64], x: f64) -> [(usize, f64); 2] {
 impl RglBsdf {
     /// Read and validate an RGL `.bsdf` file.
     pub fn read(path: &Path) -> Result<Self, BrdfError> {
-        let bytes = std::fs::read(path).map_err(|source| BrdfError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let bytes = crate::io::read(path)?;
         Self::from_bytes(&bytes).map_err(|reason| BrdfError::Format {
             path: path.to_path_buf(),
             reason,

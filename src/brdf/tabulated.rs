@@ -37,10 +37,7 @@ struct Table {
 impl TabulatedNdf {
     /// Read and validate a CSV table.
     pub fn read(path: &Path) -> Result<Self, BrdfError> {
-        let text = std::fs::read_to_string(path).map_err(|source| BrdfError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::io::read_to_string(path)?;
         Self::parse(&text).map_err(|reason| BrdfError::Format {
             path: path.to_path_buf(),
             reason,

@@ -68,18 +68,9 @@ pub struct NdfFile {
     pub format: String,
     /// Format version ([`VERSION`]).
     pub version: u32,
-    /// Cells along p.
-    pub nx: usize,
-    /// Cells along q.
-    pub ny: usize,
-    /// Lower p edge.
-    pub p_min: f64,
-    /// Upper p edge.
-    pub p_max: f64,
-    /// Lower q edge.
-    pub q_min: f64,
-    /// Upper q edge.
-    pub q_max: f64,
+    /// The slope grid (`nx`, `ny`, `p_min`, `p_max`, `q_min`, `q_max` at the top level of the JSON).
+    #[serde(flatten)]
+    pub domain: SlopeDomain,
     /// Target `P22`, row-major, rows along q.
     pub density: Vec<f64>,
     /// Observed half-angle distribution, same layout.
@@ -107,15 +98,9 @@ pub struct NdfFile {
 /// An `ndf.json` that cannot be used.
 #[derive(Debug, thiserror::Error)]
 pub enum NdfFileError {
-    /// Could not read the file.
-    #[error("cannot read {path}")]
-    Io {
-        /// The file.
-        path: std::path::PathBuf,
-        /// The I/O error.
-        #[source]
-        source: std::io::Error,
-    },
+    /// A file could not be opened or read.
+    #[error(transparent)]
+    Io(#[from] crate::io::ReadError),
     /// Not valid JSON of this format.
     #[error("{path}: {reason}")]
     Invalid {
@@ -132,12 +117,7 @@ impl From<&Ndf> for NdfFile {
         Self {
             format: FORMAT.into(),
             version: VERSION,
-            nx: d.nx,
-            ny: d.ny,
-            p_min: d.p_min,
-            p_max: d.p_max,
-            q_min: d.q_min,
-            q_max: d.q_max,
+            domain: d,
             density: n.target.density.clone(),
             observed: n.observed.density.clone(),
             stats: n.stats,
@@ -156,14 +136,7 @@ impl From<&Ndf> for NdfFile {
 impl NdfFile {
     /// The slope domain.
     pub fn domain(&self) -> SlopeDomain {
-        SlopeDomain {
-            nx: self.nx,
-            ny: self.ny,
-            p_min: self.p_min,
-            p_max: self.p_max,
-            q_min: self.q_min,
-            q_max: self.q_max,
-        }
+        self.domain
     }
 
     /// The target density as a grid.
@@ -219,10 +192,7 @@ impl NdfFile {
 
     /// Read and validate.
     pub fn read(path: &Path) -> Result<Self, NdfFileError> {
-        let text = std::fs::read_to_string(path).map_err(|source| NdfFileError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = crate::io::read_to_string(path)?;
         let invalid = |reason: String| NdfFileError::Invalid {
             path: path.to_path_buf(),
             reason,

@@ -22,7 +22,8 @@
 //!
 //! Anything else — other G and M codes, `A B C U V W` axes, `K` (arcs only in G17), `#` parameters, `[ ]`
 //! expressions, `O` words, block delete `/`, two words of one modal group or two of one letter on a line, a feed
-//! move without a feed rate, an arc whose end radius differs from its start radius — is an error.
+//! move without a feed rate, an arc whose end radius differs from its start radius by more than max(0.002 mm,
+//! 0.1%) — is an error.
 //!
 //! The program's own positions are work coordinates; the tool starts at [`ParseOptions::start_mm`] (LinuxCNC's
 //! standalone interpreter starts at the origin). Arcs are linearised into chords whose sagitta (the largest

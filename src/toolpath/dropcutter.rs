@@ -29,7 +29,7 @@ pub struct DropCutter<'a> {
     hf: &'a Heightfield,
     cutter: Shape,
     edge: Edge,
-    /// Column offsets reach: `m = ceil(r / pitch)`.
+    /// Column offsets reach: `m = ceil(r / pitch) + 1` (one spare column for rounding at the rim).
     m: usize,
 }
 

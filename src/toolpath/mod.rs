@@ -1,7 +1,7 @@
 //! Stage 4 — toolpath: a heightfield (typically the periodic facet tile) to a G-code program.
 //!
 //! - [`machine`]: versioned machine profiles (`machines/*.toml`) with their tools.
-//! - [`dropcutter`]: the exact cutter-location surface of a ball (or flat) bit over a heightfield.
+//! - [`dropcutter`]: the exact cutter-location surface of a ball, flat or bull-nose bit ([`crate::tool::Shape`]) over a heightfield.
 //! - [`raster`]: raster passes at any angle over the tile repeated across the work area.
 //! - [`simplify`]: one-sided removal of collinear points within a stated tolerance.
 //! - [`check`], [`estimate`]: the machine check and the run-time estimate; the program is written by [`crate::gcode::emit`].
