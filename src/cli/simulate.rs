@@ -10,7 +10,7 @@ use std::path::PathBuf;
 /// Arguments of `brdfmill simulate`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The G-code program (any source: the subset of DESIGN.md §5; anything else is refused with line and column)
+    /// The G-code program (any source: the subset of docs/DESIGN.md §5; anything else is refused with line and column)
     pub program: PathBuf,
     /// The bit: ball:D, flat:D or bull:D:R (diameter and corner radius, mm)
     #[arg(long)]
