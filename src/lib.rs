@@ -26,7 +26,7 @@
 pub mod analyze;
 pub mod brdf;
 pub mod facets;
-pub mod fft2;
+pub(crate) mod fft2;
 pub mod gcode;
 pub mod geometry;
 pub mod heightfield;

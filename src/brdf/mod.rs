@@ -17,10 +17,10 @@
 
 pub mod fresnel;
 pub mod merl;
-pub mod microfacet;
+pub(crate) mod microfacet;
 pub mod rgl;
 mod spec;
-pub mod tabulated;
+pub(crate) mod tabulated;
 
 pub use fresnel::{ConductorIor, PRESETS};
 pub use merl::Merl;

@@ -17,10 +17,10 @@
 //! assert!(tile.heightfield.range().1.abs() < 1e-12); // the top of the tile is the stock top, z = 0
 //! ```
 
-pub mod arrange;
+pub(crate) mod arrange;
 pub mod format;
-pub mod poisson;
-pub mod sampling;
+pub(crate) mod poisson;
+pub(crate) mod sampling;
 pub mod stl;
 
 pub use arrange::{AnnealConfig, AnnealReport, Arrangement, Energy};

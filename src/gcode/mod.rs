@@ -12,9 +12,9 @@
 //! The simulator's reader, `simulate::gcode`, builds on [`lex`] and [`modal`]: any program → straight
 //! segments, refusing what it does not understand with the line and column.
 
-pub mod emit;
-pub mod lex;
-pub mod modal;
+pub(crate) mod emit;
+pub(crate) mod lex;
+pub(crate) mod modal;
 pub mod moves;
 pub mod program;
 

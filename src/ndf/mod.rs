@@ -15,10 +15,10 @@
 //! assert!((var - 0.045).abs() < 0.002, "{var}");
 //! ```
 
-pub mod deconvolve;
+pub(crate) mod deconvolve;
 pub mod format;
 pub mod halfangle;
-pub mod lobes;
+pub(crate) mod lobes;
 
 pub use deconvolve::{LrReport, LucyRichardson, StoppedBy};
 pub use format::NdfFile;

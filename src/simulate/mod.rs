@@ -26,8 +26,8 @@
 
 pub mod deviation;
 pub mod gcode;
-pub mod stock;
-pub mod sweep;
+pub(crate) mod stock;
+pub(crate) mod sweep;
 
 pub use deviation::{deviation, Deviation};
 

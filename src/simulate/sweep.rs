@@ -169,8 +169,9 @@ impl Sweep {
         })
     }
 
-    /// The height the sweep leaves above `(x, y)`, mm; `+∞` when the bit does not pass over it.
-    #[inline]
+    /// The height the sweep leaves above `(x, y)`, mm; `+∞` when the bit does not pass over it (the tests'
+    /// pointwise form of [`Sweep::row`]).
+    #[cfg(test)]
     pub fn lowest(&self, x: f64, y: f64) -> f64 {
         let mut z = [f64::INFINITY];
         self.row(y, x, 0.0, &mut z);

@@ -11,10 +11,10 @@
 
 pub mod check;
 pub mod dropcutter;
-pub mod estimate;
+pub(crate) mod estimate;
 pub mod machine;
-pub mod raster;
-pub mod simplify;
+pub(crate) mod raster;
+pub(crate) mod simplify;
 
 use crate::gcode::emit;
 use crate::gcode::moves::{self, Move, P3};

@@ -11,10 +11,10 @@
 //! - [`render`]: sphere previews and BRDF slices,
 //! - [`report`]: the single-page offline HTML report.
 
-pub mod explain;
-pub mod metrics;
-pub mod render;
-pub mod report;
+pub(crate) mod explain;
+pub(crate) mod metrics;
+pub(crate) mod render;
+pub(crate) mod report;
 mod run;
 
 pub use metrics::{SurfaceMetrics, Tolerances};
