@@ -93,7 +93,10 @@ fn merl_forward(wi: Vec3, wo: Vec3) -> (f64, f64, f64) {
 struct Lcg(u64);
 impl Lcg {
     fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        self.0 = self
+            .0
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
         (self.0 >> 11) as f64 / (1u64 << 53) as f64
     }
     fn below(&mut self, n: usize) -> usize {
@@ -121,7 +124,10 @@ fn the_table_holds_the_closed_form_in_the_published_order_and_scales() {
             }
         }
     }
-    println!("all {} values: largest relative difference from the closed form {worst:.2e}", 3 * n);
+    println!(
+        "all {} values: largest relative difference from the closed form {worst:.2e}",
+        3 * n
+    );
     // the script stored value / scale, the reader multiplies by the scale: two roundings
     assert!(worst < 1e-15, "{worst:e}");
 }
@@ -158,7 +164,10 @@ fn eval_at_bin_centres_gives_the_closed_form() {
         "{tested} bin centres: relative difference {worst:.2e} (swapped directions {worst_recip:.2e}); \
          the test's directions reproduce their angles under MERL's transform to {worst_angle:.1e} rad"
     );
-    assert!(worst_angle < 1e-9, "the test's direction construction is not MERL's: {worst_angle:e}");
+    assert!(
+        worst_angle < 1e-9,
+        "the test's direction construction is not MERL's: {worst_angle:e}"
+    );
     // At a bin centre the reader's interpolation weights are 1 on that bin up to the rounding of the angles
     // recovered from the directions: φh and φd are ill-conditioned at the smallest θh and θd (error ≈ ε / sin θ,
     // measured above: ~1e-10 rad at the first θh bin's 4.8e-5 rad), i.e. ≤ 1e-8 of a bin, times the change to
@@ -208,7 +217,9 @@ fn eval_between_bin_centres_interpolates_the_closed_form() {
             if c < 2 {
                 for s in 0..=1000 {
                     let t = s as f64 / 1000.0 * 0.5;
-                    clamp = clamp.max((f(-t) - f(0.0)).abs()).max((f((n - 1) as f64 + t) - f((n - 1) as f64)).abs());
+                    clamp = clamp
+                        .max((f(-t) - f(0.0)).abs())
+                        .max((f((n - 1) as f64 + t) - f((n - 1) as f64)).abs());
                 }
             }
             (f2 / 8.0).max(clamp)
@@ -270,6 +281,9 @@ fn phi_d_and_its_mirror_are_told_apart() {
         let (wi, wo) = directions(th_c(i), 0.3, td_c(j), pd_c(mirror));
         let b = m.eval(&wi, &wo);
         assert!((blue(pd_c(k)) - blue(pd_c(mirror))).abs() > 0.05);
-        assert!(rel(a[2], blue(pd_c(k))) < 1e-9 && rel(b[2], blue(pd_c(mirror))) < 1e-9, "{a:?} {b:?}");
+        assert!(
+            rel(a[2], blue(pd_c(k))) < 1e-9 && rel(b[2], blue(pd_c(mirror))) < 1e-9,
+            "{a:?} {b:?}"
+        );
     }
 }

@@ -38,7 +38,9 @@ const R: f64 = 0.25;
 const EPS: f64 = 1e-12;
 
 fn load(name: &str) -> (usize, usize, Vec<f64>) {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/peers/opencamlib").join(name);
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/peers/opencamlib")
+        .join(name);
     read_f64_2d(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
@@ -82,12 +84,21 @@ fn ball_on_samples_agrees_with_opencamlib_ball_on_triangles() {
             dc.point(x, y)
         };
         // The reference is what it says: the contact lies on the triangles and on the ball's surface.
-        assert!((cc[2] - triangulated(&hf, cc[0], cc[1])).abs() < 1e-9, "CL {k}: CC point off the surface");
+        assert!(
+            (cc[2] - triangulated(&hf, cc[0], cc[1])).abs() < 1e-9,
+            "CL {k}: CC point off the surface"
+        );
         let centre = [x, y, theirs + R];
         let dist = ((cc[0] - centre[0]).powi(2) + (cc[1] - centre[1]).powi(2) + (cc[2] - centre[2]).powi(2)).sqrt();
-        assert!((dist - R).abs() < 1e-9, "CL {k}: CC point {dist} from the ball's centre");
+        assert!(
+            (dist - R).abs() < 1e-9,
+            "CL {k}: CC point {dist} from the ball's centre"
+        );
 
-        assert!(ours <= theirs + EPS, "CL {k} at ({x}, {y}): ours {ours} above OpenCAMLib's {theirs}");
+        assert!(
+            ours <= theirs + EPS,
+            "CL {k} at ({x}, {y}): ours {ours} above OpenCAMLib's {theirs}"
+        );
         let gap = theirs - ours;
         // the grid vertex nearest to the contact
         let (vi, vj) = ((cc[0] / PITCH - 0.5).round(), (cc[1] / PITCH - 0.5).round());
@@ -122,5 +133,8 @@ fn ball_on_samples_agrees_with_opencamlib_ball_on_triangles() {
         worst_gap * 1e3,
         worst_bound * 1e3
     );
-    assert!(n_vertex > 100 && n_other > 100, "the reference should exercise both kinds of contact");
+    assert!(
+        n_vertex > 100 && n_other > 100,
+        "the reference should exercise both kinds of contact"
+    );
 }

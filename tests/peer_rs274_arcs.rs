@@ -46,7 +46,9 @@ struct Record {
 }
 
 fn peers(name: &str) -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/peers/rs274").join(name)
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/peers/rs274")
+        .join(name)
 }
 
 /// The records and the MD5 of the program they came from.
@@ -160,7 +162,11 @@ struct Worst {
 fn compare(name: &str, text: &str, recs: &[Record]) -> Result<Worst, String> {
     let ours = our_arcs(text);
     if ours.len() != recs.len() {
-        return Err(format!("{name}: brdfmill read {} arcs, LinuxCNC {}", ours.len(), recs.len()));
+        return Err(format!(
+            "{name}: brdfmill read {} arcs, LinuxCNC {}",
+            ours.len(),
+            recs.len()
+        ));
     }
     let mut w = Worst {
         end: 0.0,
@@ -191,7 +197,10 @@ fn compare(name: &str, text: &str, recs: &[Record]) -> Result<Worst, String> {
             return Err(format!("{name} line {line}: start {first:?} vs LinuxCNC {:?}", r.start));
         }
         if dc > 1e-9 {
-            return Err(format!("{name} line {line}: centre {c:?} vs LinuxCNC {:?} ({dc:.3e} mm)", r.centre));
+            return Err(format!(
+                "{name} line {line}: centre {c:?} vs LinuxCNC {:?} ({dc:.3e} mm)",
+                r.centre
+            ));
         }
         if dsw > 1e-9 {
             return Err(format!(
@@ -224,7 +233,11 @@ fn md5_hex(bytes: &[u8]) -> String {
 fn every_arc_form_agrees_with_linuxcnc() {
     let (recs, md5) = records(&peers("arcs_mixed_arcs.csv"));
     let text = std::fs::read_to_string(peers("arcs_mixed.ngc")).unwrap();
-    assert_eq!(md5_hex(text.as_bytes()), md5, "arcs_mixed.ngc changed since the records were written");
+    assert_eq!(
+        md5_hex(text.as_bytes()),
+        md5,
+        "arcs_mixed.ngc changed since the records were written"
+    );
     assert_eq!(recs.len(), 23);
     // the program exercises both directions, extra turns and helices
     assert!(recs.iter().any(|r| r.rotation < 0) && recs.iter().any(|r| r.rotation > 0));
@@ -245,7 +258,11 @@ fn linuxcnc_arcspiral_agrees_with_linuxcnc() {
         eprintln!("note: {NGC} missing (apt-get install linuxcnc-uspace); arcspiral's arcs were not compared");
         return;
     };
-    assert_eq!(md5_hex(&bytes), md5, "{NGC} is not the file the records were written from");
+    assert_eq!(
+        md5_hex(&bytes),
+        md5,
+        "{NGC} is not the file the records were written from"
+    );
     compare("arcspiral.ngc", &String::from_utf8(bytes).unwrap(), &recs).unwrap();
 }
 

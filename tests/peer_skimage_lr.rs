@@ -31,7 +31,9 @@ use brdfmill::npy::read_f64_2d;
 use std::path::PathBuf;
 
 fn data(name: &str) -> (usize, usize, Vec<f64>) {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/peers/skimage").join(name);
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/peers/skimage")
+        .join(name);
     read_f64_2d(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
@@ -77,14 +79,22 @@ fn tolerance(iterations: usize) -> f64 {
 fn smooth_blobs_agree_with_scikit_image_cell_by_cell() {
     let (rel, scale) = compare("smooth", 50);
     assert!(scale > 0.5, "reference looks empty");
-    assert!(rel <= tolerance(50), "smooth: relative difference {rel:.3e} > {:.1e}", tolerance(50));
+    assert!(
+        rel <= tolerance(50),
+        "smooth: relative difference {rel:.3e} > {:.1e}",
+        tolerance(50)
+    );
 }
 
 #[test]
 fn compact_support_and_asymmetric_kernel_agree_with_scikit_image_cell_by_cell() {
     let (rel, scale) = compare("compact", 30);
     assert!(scale > 0.5, "reference looks empty");
-    assert!(rel <= tolerance(30), "compact: relative difference {rel:.3e} > {:.1e}", tolerance(30));
+    assert!(
+        rel <= tolerance(30),
+        "compact: relative difference {rel:.3e} > {:.1e}",
+        tolerance(30)
+    );
 }
 
 /// The check can fail: the same arrays with the kernel mirrored (the orientation a transposed or flipped
@@ -101,6 +111,10 @@ fn a_mirrored_kernel_or_another_iteration_count_is_seen() {
         let mut est = vec![0.5; nx * ny];
         lr.run(&observed, &mut est, iterations, 0.0);
         let worst = est.iter().zip(&theirs).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        assert!(worst / scale > 1e-4, "{what}: only {:.3e} from the reference", worst / scale);
+        assert!(
+            worst / scale > 1e-4,
+            "{what}: only {:.3e} from the reference",
+            worst / scale
+        );
     }
 }

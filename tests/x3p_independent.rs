@@ -35,7 +35,9 @@ fn z_m(i: usize, j: usize) -> f64 {
 }
 
 fn read(name: &str) -> X3p {
-    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/peers/x3p").join(name);
+    let p = PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("tests/data/peers/x3p")
+        .join(name);
     x3p::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()))
 }
 
@@ -43,7 +45,10 @@ fn read(name: &str) -> X3p {
 /// |z_mm − closed form| over the points that are not.
 fn check_grid(s: &X3p, name: &str, missing: &[(usize, usize)], check_validity: bool) -> f64 {
     assert_eq!((s.nx, s.ny), (NX, NY), "{name}: size");
-    assert!((s.pitch_x_mm - DX * 1e3).abs() < 1e-15 && (s.pitch_y_mm - DY * 1e3).abs() < 1e-15, "{name}: spacing");
+    assert!(
+        (s.pitch_x_mm - DX * 1e3).abs() < 1e-15 && (s.pitch_y_mm - DY * 1e3).abs() < 1e-15,
+        "{name}: spacing"
+    );
     let mut worst = 0.0f64;
     for j in 0..NY {
         for i in 0..NX {
@@ -116,7 +121,10 @@ fn the_real_scan_reads_as_x3pio_reads_it() {
     .unwrap();
     let field = |key: &str| -> f64 {
         let line = csv.lines().nth(1).unwrap();
-        let v = line.split_whitespace().find_map(|w| w.strip_prefix(&format!("{key}="))).unwrap();
+        let v = line
+            .split_whitespace()
+            .find_map(|w| w.strip_prefix(&format!("{key}=")))
+            .unwrap();
         v.parse().unwrap()
     };
     assert_eq!((s.nx, s.ny), (field("nx") as usize, field("ny") as usize));
@@ -128,7 +136,11 @@ fn the_real_scan_reads_as_x3pio_reads_it() {
         let (k, z) = line.split_once(',').unwrap();
         let (k, z): (usize, f64) = (k.parse().unwrap(), z.parse().unwrap());
         if z.is_nan() {
-            assert!(!s.valid[k] && s.z_mm[k].is_nan(), "point {k}: x3pio has no height, brdfmill {}", s.z_mm[k]);
+            assert!(
+                !s.valid[k] && s.z_mm[k].is_nan(),
+                "point {k}: x3pio has no height, brdfmill {}",
+                s.z_mm[k]
+            );
         } else {
             assert!(s.valid[k], "point {k}: x3pio has a height, brdfmill marks it invalid");
             // float64 metres × 1000 (brdfmill) against × 1 then × 1000 here: within an ulp
