@@ -1,6 +1,8 @@
 #!/usr/bin/env python3
 """Drop-cutter: brdfmill against OpenCAMLib's BatchDropCutter with a BallCutter, on the same 256² heightfield
-(10 µm pitch, 1 mm ball) triangulated, measured in one run on this machine; also compares the CL heights.
+(10 µm pitch, 1 mm ball) triangulated, measured in one run on this machine; also prints the CL height
+differences. (They are checked, with a derived bound, in `tests/peer_opencamlib_dropcutter.rs` from data
+that `scripts/peer_opencamlib_dropcutter.py` writes.)
 
     python3 -m venv .venv && .venv/bin/pip install opencamlib numpy
     .venv/bin/python scripts/bench_dropcutter_vs_ocl.py

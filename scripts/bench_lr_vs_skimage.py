@@ -1,6 +1,7 @@
 #!/usr/bin/env python3
 """Lucy–Richardson: brdfmill against scikit-image's `richardson_lucy`, same grid, kernel and iteration count,
-measured in one run on this machine.
+measured in one run on this machine. (The results are compared, cell by cell, in
+`tests/peer_skimage_lr.rs` from data that `scripts/peer_skimage_lr.py` writes.)
 
     python3 -m venv .venv && .venv/bin/pip install scikit-image numpy
     .venv/bin/python scripts/bench_lr_vs_skimage.py
