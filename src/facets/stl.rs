@@ -1,4 +1,4 @@
-//! The exact faceted solid of one tile as binary STL: every facet's planar top, the vertical walls where
+//! The exact faceted solid of one tile, as triangles for [`crate::stl`]: every facet's planar top, the vertical walls where
 //! neighbouring facet planes do not meet, the four outer sides and a flat bottom.
 //!
 //! The mesh is closed: wherever several faces meet along a vertical line (a facet corner), every face's
@@ -8,9 +8,7 @@
 
 use super::Arrangement;
 use crate::geometry::Vec3;
-
-/// A triangle with its three vertices, counter-clockwise seen from outside.
-pub type Triangle = [Vec3; 3];
+use crate::stl::Triangle;
 
 const EPS: f64 = 1e-9;
 
@@ -231,36 +229,10 @@ pub fn tile_solid(a: &Arrangement, z_mm: &[f64], facet_mm: f64, base_mm: f64) ->
     b.tris
 }
 
-/// Encode triangles as binary STL (f32, normals from the vertex order).
-pub fn to_binary_stl(tris: &[Triangle], header: &str) -> Vec<u8> {
-    let mut out = Vec::with_capacity(84 + 50 * tris.len());
-    let mut h = [b' '; 80];
-    for (d, s) in h.iter_mut().zip(header.bytes()) {
-        *d = s;
-    }
-    out.extend_from_slice(&h);
-    out.extend_from_slice(&(tris.len() as u32).to_le_bytes());
-    for t in tris {
-        let n = (t[1] - t[0]).cross(&(t[2] - t[0]));
-        let n = if n.norm() > 0.0 { n.normalize() } else { n };
-        for v in std::iter::once(&n).chain(t.iter()) {
-            for c in [v.x, v.y, v.z] {
-                out.extend_from_slice(&(c as f32).to_le_bytes());
-            }
-        }
-        out.extend_from_slice(&0u16.to_le_bytes());
-    }
-    out
-}
-
-/// Signed volume enclosed by a closed, outward-oriented triangle mesh (divergence theorem).
-pub fn volume(tris: &[Triangle]) -> f64 {
-    tris.iter().map(|t| t[0].dot(&t[1].cross(&t[2]))).sum::<f64>() / 6.0
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::stl::{to_binary_stl, volume};
     use rand::{Rng, SeedableRng};
     use std::collections::HashMap;
 
@@ -305,18 +277,6 @@ mod tests {
             let v = volume(&tris);
             assert!((v - expect).abs() < 1e-9 * expect, "{w}×{h}: volume {v} vs {expect}");
         }
-    }
-
-    #[test]
-    fn binary_stl_layout() {
-        let (a, z) = random_tile(2, 2, 9);
-        let tris = tile_solid(&a, &z, 1.0, -1.0);
-        let bytes = to_binary_stl(&tris, "brdfmill tile");
-        assert_eq!(bytes.len(), 84 + 50 * tris.len());
-        assert_eq!(
-            u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize,
-            tris.len()
-        );
     }
 
     /// The exact bytes (and the f64 vertices) of fixed tiles, hashed: construction changes that alter the
