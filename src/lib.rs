@@ -38,6 +38,7 @@ pub mod optics;
 pub mod plot;
 pub mod simulate;
 pub mod slope;
+pub mod stl;
 pub mod stream;
 pub mod tool;
 pub mod toolpath;

@@ -232,170 +232,290 @@ fn hex(d: &[u8]) -> String {
 
 /// Read an X3P file (see the module notes for what is supported).
 pub fn read(path: &Path) -> Result<X3p, X3pError> {
-    let io = |source| X3pError::Io {
-        path: path.to_path_buf(),
-        source,
-    };
-    let zerr = |e: zip::result::ZipError| X3pError::Zip {
-        path: path.to_path_buf(),
-        message: e.to_string(),
-    };
-    let file = std::fs::File::open(path).map_err(io)?;
-    let mut zip = zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(zerr)?;
-    let names: Vec<String> = zip.file_names().map(str::to_string).collect();
-    let main_xml = names
-        .iter()
-        .filter(|n| !is_junk(n) && (*n == "main.xml" || n.ends_with("/main.xml")))
-        .min_by_key(|n| n.len())
-        .cloned()
-        .ok_or_else(|| X3pError::MissingEntry {
-            path: path.to_path_buf(),
-            entry: "main.xml".into(),
-        })?;
-    let base = &main_xml[..main_xml.len() - "main.xml".len()];
-    let mut read_entry = |name: &str| -> Result<Vec<u8>, X3pError> {
-        let mut f = zip.by_name(name).map_err(|_| X3pError::MissingEntry {
-            path: path.to_path_buf(),
-            entry: name.to_string(),
-        })?;
-        let mut v = Vec::with_capacity(f.size() as usize);
-        f.read_to_end(&mut v).map_err(io)?;
-        Ok(v)
-    };
-    let xml_bytes = read_entry(&main_xml)?;
+    let mut ar = Archive::open(path)?;
+    let xml_bytes = ar.entry(&ar.main_xml.clone())?;
     let xml = String::from_utf8_lossy(&xml_bytes);
     let xml = xml.trim_start_matches('\u{feff}');
     let doc = roxmltree::Document::parse(xml).map_err(|e| X3pError::Xml {
         path: path.to_path_buf(),
         message: e.to_string(),
     })?;
-    let field_err = |field: &str, message: String| X3pError::Field {
-        path: path.to_path_buf(),
-        field: field.to_string(),
-        message,
+    let m = MainXml { doc: &doc, path };
+    let l = Layout::read(&m)?;
+    let (mut z, checksum_ok) = point_values(&mut ar, &m, &l)?;
+    let valid = validity(&mut ar, &m, &z)?;
+    for (v, ok) in z.iter_mut().zip(&valid) {
+        // (no `+ 0.0` when there is no offset: it would turn −0.0 into +0.0)
+        *v = match (*ok, l.offset_mm == 0.0) {
+            (false, _) => f64::NAN,
+            (true, true) => *v * l.scale,
+            (true, false) => *v * l.scale + l.offset_mm,
+        };
+    }
+    let instrument = match (
+        m.text("Record2/Instrument/Manufacturer"),
+        m.text("Record2/Instrument/Model"),
+    ) {
+        (Some(a), Some(b)) => Some(format!("{a} {b}")),
+        (a, b) => a.or(b),
     };
-    let find = |route: &str| -> Option<roxmltree::Node<'_, '_>> {
-        let mut node = doc.root_element();
+    Ok(X3p {
+        nx: l.nx,
+        ny: l.ny,
+        pitch_x_mm: l.pitch_mm[0],
+        pitch_y_mm: l.pitch_mm[1],
+        z_mm: z,
+        valid,
+        data_type: l.data_type,
+        main_xml: ar.main_xml,
+        creator: m.text("Record2/Creator"),
+        instrument,
+        data_checksum_ok: checksum_ok,
+    })
+}
+
+/// An open X3P archive and where its `main.xml` sits (links resolve relative to that folder).
+struct Archive<'p> {
+    path: &'p Path,
+    zip: zip::ZipArchive<std::io::BufReader<std::fs::File>>,
+    main_xml: String,
+}
+
+impl<'p> Archive<'p> {
+    /// Open the zip and find `main.xml`: the shortest path ending in it, macOS resource forks ignored.
+    fn open(path: &'p Path) -> Result<Self, X3pError> {
+        let file = std::fs::File::open(path).map_err(|source| X3pError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        let zip = zip::ZipArchive::new(std::io::BufReader::new(file)).map_err(|e| X3pError::Zip {
+            path: path.to_path_buf(),
+            message: e.to_string(),
+        })?;
+        let main_xml = zip
+            .file_names()
+            .filter(|n| !is_junk(n) && (*n == "main.xml" || n.ends_with("/main.xml")))
+            .min_by_key(|n| n.len())
+            .map(str::to_string)
+            .ok_or_else(|| X3pError::MissingEntry {
+                path: path.to_path_buf(),
+                entry: "main.xml".into(),
+            })?;
+        Ok(Self { path, zip, main_xml })
+    }
+
+    /// The archive entry a link in `main.xml` names.
+    fn linked(&self, link: &str) -> String {
+        let base = &self.main_xml[..self.main_xml.len() - "main.xml".len()];
+        format!("{base}{}", link.trim_start_matches("./"))
+    }
+
+    /// The bytes of one entry.
+    fn entry(&mut self, name: &str) -> Result<Vec<u8>, X3pError> {
+        let mut f = self.zip.by_name(name).map_err(|_| X3pError::MissingEntry {
+            path: self.path.to_path_buf(),
+            entry: name.to_string(),
+        })?;
+        let mut v = Vec::with_capacity(f.size() as usize);
+        f.read_to_end(&mut v).map_err(|source| X3pError::Io {
+            path: self.path.to_path_buf(),
+            source,
+        })?;
+        Ok(v)
+    }
+}
+
+/// The fields of a parsed `main.xml`, by their path in the record structure (`Record3/MatrixDimension/SizeX`).
+struct MainXml<'a, 'input> {
+    doc: &'a roxmltree::Document<'input>,
+    path: &'a Path,
+}
+
+impl<'a, 'input> MainXml<'a, 'input> {
+    fn err(&self, field: &str, message: String) -> X3pError {
+        X3pError::Field {
+            path: self.path.to_path_buf(),
+            field: field.to_string(),
+            message,
+        }
+    }
+
+    fn find(&self, route: &str) -> Option<roxmltree::Node<'a, 'input>> {
+        let mut node = self.doc.root_element();
         for part in route.split('/') {
             node = node
                 .children()
                 .find(|c| c.is_element() && c.tag_name().name() == part)?;
         }
         Some(node)
-    };
-    let text = |route: &str| find(route).and_then(|n| n.text()).map(|t| t.trim().to_string());
-    let num = |route: &str| -> Result<f64, X3pError> {
-        let t = text(route).ok_or_else(|| field_err(route, "missing".into()))?;
+    }
+
+    /// The trimmed text of a field, None when it is absent or has no text.
+    fn text(&self, route: &str) -> Option<String> {
+        self.find(route).and_then(|n| n.text()).map(|t| t.trim().to_string())
+    }
+
+    fn num(&self, route: &str) -> Result<f64, X3pError> {
+        let t = self.text(route).ok_or_else(|| self.err(route, "missing".into()))?;
         t.parse::<f64>()
-            .map_err(|_| field_err(route, format!("`{t}` is not a number")))
-    };
-    let size = |route: &str| -> Result<usize, X3pError> {
-        let t = text(route).ok_or_else(|| field_err(route, "missing".into()))?;
+            .map_err(|_| self.err(route, format!("`{t}` is not a number")))
+    }
+
+    fn size(&self, route: &str) -> Result<usize, X3pError> {
+        let t = self.text(route).ok_or_else(|| self.err(route, "missing".into()))?;
         t.parse::<usize>()
-            .map_err(|_| field_err(route, format!("`{t}` is not a count")))
-    };
-    let nx = size("Record3/MatrixDimension/SizeX")?;
-    let ny = size("Record3/MatrixDimension/SizeY")?;
-    let nz = size("Record3/MatrixDimension/SizeZ")?;
-    if nx == 0 || ny == 0 || nz != 1 || nx.checked_mul(ny).is_none_or(|n| n > 1 << 30) {
-        return Err(field_err(
-            "Record3/MatrixDimension",
-            format!("unsupported size {nx}×{ny}×{nz} (an areal surface has SizeZ 1)"),
-        ));
+            .map_err(|_| self.err(route, format!("`{t}` is not a count")))
     }
-    let mut pitch = [0.0; 2];
-    for (p, ax) in pitch.iter_mut().zip(["CX", "CY"]) {
-        let route = format!("Record1/Axes/{ax}/Increment");
-        let v = num(&route)?;
-        if !(v.is_finite() && v > 0.0) {
-            return Err(field_err(&route, format!("spacing must be positive, got {v}")));
+
+    /// A number that may be absent or empty (then `default`).
+    fn num_or(&self, route: &str, default: f64) -> Result<f64, X3pError> {
+        match self.text(route).filter(|t| !t.is_empty()) {
+            Some(_) => self.num(route),
+            None => Ok(default),
         }
-        *p = v * 1000.0;
     }
-    let data_type = text("Record1/Axes/CZ/DataType")
-        .and_then(|t| t.chars().next())
-        .ok_or_else(|| field_err("Record1/Axes/CZ/DataType", "missing".into()))?;
-    let inc = match text("Record1/Axes/CZ/Increment").filter(|t| !t.is_empty()) {
-        Some(_) => num("Record1/Axes/CZ/Increment")?,
-        None => 1.0,
-    };
-    let offset = match text("Record1/Axes/CZ/Offset").filter(|t| !t.is_empty()) {
-        Some(_) => num("Record1/Axes/CZ/Offset")?,
-        None => 0.0,
-    };
-    let (scale, offset_mm) = (inc * 1000.0, offset * 1000.0);
-    let n = nx * ny;
-    let mut z = vec![f64::NAN; n];
-    let mut checksum_ok = None;
-    if let Some(link) = text("Record3/DataLink/PointDataLink") {
-        let entry = format!("{base}{}", link.trim_start_matches("./"));
-        let bytes = read_entry(&entry)?;
-        if let Some(want) = text("Record3/DataLink/MD5ChecksumPointData") {
-            checksum_ok = Some(hex(&Md5::digest(&bytes)).eq_ignore_ascii_case(want.trim()));
-        }
-        let width = match data_type {
-            'D' => 8,
-            'F' | 'L' => 4,
-            'I' => 2,
-            c => {
-                return Err(field_err(
-                    "Record1/Axes/CZ/DataType",
-                    format!("unknown data type `{c}` (D, F, L or I)"),
-                ))
-            }
-        };
-        if bytes.len() != n * width {
-            return Err(X3pError::Data {
-                path: path.to_path_buf(),
-                entry,
-                message: format!(
-                    "{} bytes for {nx}×{ny} points of type {data_type} ({} expected)",
-                    bytes.len(),
-                    n * width
-                ),
-            });
-        }
-        for (k, c) in bytes.chunks_exact(width).enumerate() {
-            let v = match data_type {
-                'D' => f64::from_le_bytes(c.try_into().unwrap_or([0; 8])),
-                'F' => f32::from_le_bytes(c.try_into().unwrap_or([0; 4])) as f64,
-                'L' => i32::from_le_bytes(c.try_into().unwrap_or([0; 4])) as f64,
-                _ => i16::from_le_bytes(c.try_into().unwrap_or([0; 2])) as f64,
-            };
-            z[k] = v;
-        }
-    } else if let Some(list) = find("Record3/DataList") {
-        let data: Vec<_> = list
-            .children()
-            .filter(|c| c.is_element() && c.tag_name().name() == "Datum")
-            .collect();
-        if data.len() != n {
-            return Err(field_err(
-                "Record3/DataList",
-                format!("{} Datum elements for {nx}×{ny} points", data.len()),
+}
+
+/// The matrix size, spacing and Z encoding declared in Records 1 and 3.
+struct Layout {
+    nx: usize,
+    ny: usize,
+    /// `CX`, `CY` increments, mm.
+    pitch_mm: [f64; 2],
+    data_type: char,
+    /// `CZ/Increment`, scaled to mm.
+    scale: f64,
+    /// `CZ/Offset`, mm.
+    offset_mm: f64,
+}
+
+impl Layout {
+    fn read(m: &MainXml) -> Result<Self, X3pError> {
+        let nx = m.size("Record3/MatrixDimension/SizeX")?;
+        let ny = m.size("Record3/MatrixDimension/SizeY")?;
+        let nz = m.size("Record3/MatrixDimension/SizeZ")?;
+        if nx == 0 || ny == 0 || nz != 1 || nx.checked_mul(ny).is_none_or(|n| n > 1 << 30) {
+            return Err(m.err(
+                "Record3/MatrixDimension",
+                format!("unsupported size {nx}×{ny}×{nz} (an areal surface has SizeZ 1)"),
             ));
         }
-        for (k, d) in data.iter().enumerate() {
-            let t = d.text().map(str::trim).unwrap_or("");
-            if !t.is_empty() {
-                z[k] = t
-                    .parse::<f64>()
-                    .map_err(|_| field_err("Record3/DataList/Datum", format!("`{t}` at point {k}")))?;
+        let mut pitch_mm = [0.0; 2];
+        for (p, ax) in pitch_mm.iter_mut().zip(["CX", "CY"]) {
+            let route = format!("Record1/Axes/{ax}/Increment");
+            let v = m.num(&route)?;
+            if !(v.is_finite() && v > 0.0) {
+                return Err(m.err(&route, format!("spacing must be positive, got {v}")));
             }
+            *p = v * 1000.0;
         }
+        let data_type = m
+            .text("Record1/Axes/CZ/DataType")
+            .and_then(|t| t.chars().next())
+            .ok_or_else(|| m.err("Record1/Axes/CZ/DataType", "missing".into()))?;
+        let inc = m.num_or("Record1/Axes/CZ/Increment", 1.0)?;
+        let offset = m.num_or("Record1/Axes/CZ/Offset", 0.0)?;
+        Ok(Self {
+            nx,
+            ny,
+            pitch_mm,
+            data_type,
+            scale: inc * 1000.0,
+            offset_mm: offset * 1000.0,
+        })
+    }
+}
+
+/// The stored Z values (unscaled, NaN for an empty `Datum`) from the binary point data or the inline
+/// `DataList`, and whether the binary data matched `MD5ChecksumPointData` (None: no checksum given).
+fn point_values(ar: &mut Archive, m: &MainXml, l: &Layout) -> Result<(Vec<f64>, Option<bool>), X3pError> {
+    if let Some(link) = m.text("Record3/DataLink/PointDataLink") {
+        binary_values(ar, m, l, &link)
+    } else if let Some(list) = m.find("Record3/DataList") {
+        Ok((listed_values(m, l, list)?, None))
     } else {
-        return Err(field_err(
-            "Record3/DataLink/PointDataLink",
-            "missing (and no DataList)".into(),
+        Err(m.err("Record3/DataLink/PointDataLink", "missing (and no DataList)".into()))
+    }
+}
+
+/// Point data from the binary entry `link` names (little-endian, of the declared data type).
+fn binary_values(ar: &mut Archive, m: &MainXml, l: &Layout, link: &str) -> Result<(Vec<f64>, Option<bool>), X3pError> {
+    let (nx, ny, data_type) = (l.nx, l.ny, l.data_type);
+    let n = nx * ny;
+    let entry = ar.linked(link);
+    let bytes = ar.entry(&entry)?;
+    let checksum_ok = m
+        .text("Record3/DataLink/MD5ChecksumPointData")
+        .map(|want| hex(&Md5::digest(&bytes)).eq_ignore_ascii_case(want.trim()));
+    let width = match data_type {
+        'D' => 8,
+        'F' | 'L' => 4,
+        'I' => 2,
+        c => {
+            return Err(m.err(
+                "Record1/Axes/CZ/DataType",
+                format!("unknown data type `{c}` (D, F, L or I)"),
+            ))
+        }
+    };
+    if bytes.len() != n * width {
+        return Err(X3pError::Data {
+            path: m.path.to_path_buf(),
+            entry,
+            message: format!(
+                "{} bytes for {nx}×{ny} points of type {data_type} ({} expected)",
+                bytes.len(),
+                n * width
+            ),
+        });
+    }
+    let z = bytes
+        .chunks_exact(width)
+        .map(|c| match data_type {
+            'D' => f64::from_le_bytes(c.try_into().unwrap_or([0; 8])),
+            'F' => f32::from_le_bytes(c.try_into().unwrap_or([0; 4])) as f64,
+            'L' => i32::from_le_bytes(c.try_into().unwrap_or([0; 4])) as f64,
+            _ => i16::from_le_bytes(c.try_into().unwrap_or([0; 2])) as f64,
+        })
+        .collect();
+    Ok((z, checksum_ok))
+}
+
+/// Point data from an inline `DataList`: one `Datum` per point, empty for an invalid one.
+fn listed_values(m: &MainXml, l: &Layout, list: roxmltree::Node) -> Result<Vec<f64>, X3pError> {
+    let (nx, ny) = (l.nx, l.ny);
+    let data: Vec<_> = list
+        .children()
+        .filter(|c| c.is_element() && c.tag_name().name() == "Datum")
+        .collect();
+    if data.len() != nx * ny {
+        return Err(m.err(
+            "Record3/DataList",
+            format!("{} Datum elements for {nx}×{ny} points", data.len()),
         ));
     }
+    let mut z = vec![f64::NAN; nx * ny];
+    for (k, d) in data.iter().enumerate() {
+        let t = d.text().map(str::trim).unwrap_or("");
+        if !t.is_empty() {
+            z[k] = t
+                .parse::<f64>()
+                .map_err(|_| m.err("Record3/DataList/Datum", format!("`{t}` at point {k}")))?;
+        }
+    }
+    Ok(z)
+}
+
+/// Which points are valid: finite values, and set in the `ValidPointsLink` bit array when there is one.
+fn validity(ar: &mut Archive, m: &MainXml, z: &[f64]) -> Result<Vec<bool>, X3pError> {
+    let n = z.len();
     let mut valid: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
-    if let Some(link) = text("Record3/ValidPointsLink") {
-        let entry = format!("{base}{}", link.trim_start_matches("./"));
-        let bits = read_entry(&entry)?;
+    if let Some(link) = m.text("Record3/ValidPointsLink") {
+        let entry = ar.linked(&link);
+        let bits = ar.entry(&entry)?;
         if bits.len() * 8 < n {
             return Err(X3pError::Data {
-                path: path.to_path_buf(),
+                path: m.path.to_path_buf(),
                 entry,
                 message: format!("{} bytes of validity bits for {n} points", bits.len()),
             });
@@ -404,34 +524,7 @@ pub fn read(path: &Path) -> Result<X3p, X3pError> {
             *v &= bits[k / 8] >> (k % 8) & 1 == 1;
         }
     }
-    for (v, ok) in z.iter_mut().zip(&valid) {
-        // (no `+ 0.0` when there is no offset: it would turn −0.0 into +0.0)
-        *v = match (*ok, offset_mm == 0.0) {
-            (false, _) => f64::NAN,
-            (true, true) => *v * scale,
-            (true, false) => *v * scale + offset_mm,
-        };
-    }
-    let instrument = match (
-        text("Record2/Instrument/Manufacturer"),
-        text("Record2/Instrument/Model"),
-    ) {
-        (Some(a), Some(b)) => Some(format!("{a} {b}")),
-        (a, b) => a.or(b),
-    };
-    Ok(X3p {
-        nx,
-        ny,
-        pitch_x_mm: pitch[0],
-        pitch_y_mm: pitch[1],
-        z_mm: z,
-        valid,
-        data_type,
-        main_xml,
-        creator: text("Record2/Creator"),
-        instrument,
-        data_checksum_ok: checksum_ok,
-    })
+    Ok(valid)
 }
 
 fn main_xml(hf: &Heightfield, data_md5: &str) -> String {

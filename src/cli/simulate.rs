@@ -112,7 +112,7 @@ pub fn run(a: &Args) -> Result<()> {
     });
     let stl = a.stl.then(|| {
         let tris = simulate::solid(&sim, a.stl_side, 1.0);
-        brdfmill::facets::stl::to_binary_stl(&tris, "brdfmill simulated cut")
+        brdfmill::stl::to_binary_stl(&tris, "brdfmill simulated cut")
     });
     let json = simulate::SimFile::new(
         &sim,

@@ -241,7 +241,7 @@ impl Tile {
     /// The exact faceted solid of one tile as binary STL (mm), its flat bottom 1 mm below the lowest point.
     pub fn stl(&self) -> Vec<u8> {
         let (lo, _) = self.heightfield.range();
-        stl::to_binary_stl(
+        crate::stl::to_binary_stl(
             &stl::tile_solid(&self.arrangement, &self.z_mm, self.config.facet_mm, lo - 1.0),
             "brdfmill tile, mm",
         )

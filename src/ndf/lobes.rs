@@ -12,7 +12,7 @@
 
 use super::{halfangle, NdfConfig, NdfError};
 use crate::brdf::Brdf;
-use crate::slope::{SlopeDomain, SlopeGrid};
+use crate::slope::{splat, SlopeDomain, SlopeGrid};
 
 /// A base lobe on the slope grid's spacing.
 #[derive(Clone, Debug, PartialEq)]
@@ -162,26 +162,6 @@ impl Kernel {
             }
         }
         (vp, vq)
-    }
-}
-
-/// Add `w` at `(p, q)` spread bilinearly over the four nearest cell centres.
-pub fn splat(g: &mut SlopeGrid, p: f64, q: f64, w: f64) {
-    let d = g.domain;
-    let x = (p - d.p_min) / d.dp() - 0.5;
-    let y = (q - d.q_min) / d.dq() - 0.5;
-    let (x0, y0) = (x.floor(), y.floor());
-    let (fx, fy) = (x - x0, y - y0);
-    for (dx, dy, ww) in [
-        (0, 0, (1.0 - fx) * (1.0 - fy)),
-        (1, 0, fx * (1.0 - fy)),
-        (0, 1, (1.0 - fx) * fy),
-        (1, 1, fx * fy),
-    ] {
-        let (i, j) = (x0 as isize + dx, y0 as isize + dy);
-        if i >= 0 && j >= 0 && (i as usize) < d.nx && (j as usize) < d.ny {
-            g.density[j as usize * d.nx + i as usize] += w * ww;
-        }
     }
 }
 

@@ -12,8 +12,7 @@
 use crate::brdf::{ConductorIor, Rgb};
 use crate::geometry::{half_vector, normal_to_slope, Vec3};
 use crate::heightfield::Heightfield;
-use crate::ndf::lobes::splat;
-use crate::slope::{SlopeDomain, SlopeGrid, SmithTable};
+use crate::slope::{splat, SlopeDomain, SlopeGrid, SmithTable};
 use rayon::prelude::*;
 
 /// Slopes of a heightfield by central differences, after an optional Gaussian pre-filter (σ in µm).

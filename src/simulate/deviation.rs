@@ -143,6 +143,11 @@ fn bilinear(v: &[f64], c: [usize; 4], tx: f64, ty: f64) -> f64 {
 
 /// `out(x) = max_{|u| ≤ R} z(x + u) − prof(|u|)` over a grid (the drop-cutter dilation, DESIGN.md §4), rows
 /// in parallel; with `periodic` the grid wraps, otherwise samples beyond it are absent.
+///
+/// The same samples and rim tolerance as `toolpath::dropcutter::DropCutter::surface`, but not the same
+/// rounding: that forms the row offset as `(j′ + ½)·p − y` and the profile from `ρ²`, this one as `dj·p` and
+/// from `ρ`, so the two agree only to a few ulp (≤ 6e-17 mm on ball and bull tests, exact for a flat), which
+/// would move the last digits of the reported opening statistics.
 fn dilate(z: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &Shape) -> Vec<f64> {
     let bit = tool.normalized();
     let r = bit.radius_mm();
@@ -215,127 +220,166 @@ fn opening(h: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &S
 /// Compare a simulation with the design tile (periodic, repeated from the work origin; a non-periodic design
 /// is placed once at the origin and cells beyond it are not assessed). An invalid design assesses nothing.
 pub fn deviation(sim: &Simulation, design: &Heightfield, tool: &Shape) -> Deviation {
-    let hf = &sim.heightfield;
-    let p = hf.pitch_mm;
-    let r = tool.radius_mm();
-    let margin = 2.0 * r + p;
-    let mut dev = Deviation {
-        nx: hf.nx,
-        ny: hf.ny,
-        pitch_mm: p,
-        origin_mm: sim.origin_mm,
-        map_um: vec![f32::NAN; hf.nx * hf.ny],
-        unreachable: vec![false; hf.nx * hf.ny],
-        interior_margin_mm: margin,
-        interior_cells: 0,
-        unreachable_cells: 0,
-        unreachable_fraction: f64::NAN,
-        reach_tolerance_um: REACH_TOLERANCE_UM,
-        max_over_um: f64::NAN,
-        max_over_at_mm: [f64::NAN; 2],
-        max_under_um: f64::NAN,
-        max_under_at_mm: [f64::NAN; 2],
-        max_over_reachable_um: f64::NAN,
-        max_over_reachable_at_mm: [f64::NAN; 2],
-        max_above_opening_um: f64::NAN,
-        max_above_opening_at_mm: [f64::NAN; 2],
-        rms_reachable_um: f64::NAN,
-    };
+    let margin = 2.0 * tool.radius_mm() + sim.heightfield.pitch_mm;
+    let mut dev = Deviation::unassessed(sim, margin);
     if design.check_invariants().is_err() || tool.validate().is_err() {
         return dev;
     }
-    // interior cells
-    let (i_lo, i_hi) = ((margin / p - 0.5).ceil() as usize, hf.nx as f64 - 0.5 - margin / p);
-    let (j_lo, j_hi) = ((margin / p - 0.5).ceil() as usize, hf.ny as f64 - 0.5 - margin / p);
-    if i_hi < i_lo as f64 || j_hi < j_lo as f64 {
+    let Some(cells) = Interior::of(sim, margin) else {
         return dev;
+    };
+    let Some(win) = Window::around(design, sim, &cells, tool) else {
+        return dev;
+    };
+    let acc = compare(sim, &win, &cells, &mut dev.map_um, &mut dev.unreachable);
+    if acc.n > 0 {
+        dev.record(&acc);
     }
-    let (i_hi, j_hi) = (i_hi.floor() as usize, j_hi.floor() as usize);
-    // the design window: the interior plus two tool radii (CL needs one, the opening another)
-    let pd = design.pitch_mm;
-    let [x_lo, y_lo] = sim.cell_xy(i_lo, j_lo);
-    let [x_hi, y_hi] = sim.cell_xy(i_hi, j_hi);
-    let pad = 2.0 * r + 2.0 * pd;
-    let (mut k0, mut l0) = (((x_lo - pad) / pd).floor() as i64, ((y_lo - pad) / pd).floor() as i64);
-    let (mut k1, mut l1) = (((x_hi + pad) / pd).ceil() as i64, ((y_hi + pad) / pd).ceil() as i64);
-    let periodic_whole = design.periodic && (k1 - k0 + 1) * (l1 - l0 + 1) >= (design.nx * design.ny) as i64;
-    if !design.periodic {
-        k0 = k0.max(0);
-        l0 = l0.max(0);
-        k1 = k1.min(design.nx as i64 - 1);
-        l1 = l1.min(design.ny as i64 - 1);
-        if k1 < k0 || l1 < l0 {
-            return dev;
+    dev
+}
+
+/// The assessed cells: `i_lo..=i_hi` by `j_lo..=j_hi`.
+struct Interior {
+    i_lo: usize,
+    i_hi: usize,
+    j_lo: usize,
+    j_hi: usize,
+}
+
+impl Interior {
+    /// The cells at least `margin` from the stock's edge, None when there are none.
+    fn of(sim: &Simulation, margin: f64) -> Option<Self> {
+        let hf = &sim.heightfield;
+        let p = hf.pitch_mm;
+        let (i_lo, i_hi) = ((margin / p - 0.5).ceil() as usize, hf.nx as f64 - 0.5 - margin / p);
+        let (j_lo, j_hi) = ((margin / p - 0.5).ceil() as usize, hf.ny as f64 - 0.5 - margin / p);
+        if i_hi < i_lo as f64 || j_hi < j_lo as f64 {
+            return None;
         }
+        Some(Self {
+            i_lo,
+            i_hi: i_hi.floor() as usize,
+            j_lo,
+            j_hi: j_hi.floor() as usize,
+        })
     }
-    let mut win = if periodic_whole {
-        Window {
-            nx: design.nx,
-            ny: design.ny,
-            k0: 0,
-            l0: 0,
-            periodic: true,
-            pitch: pd,
-            h: design.z_mm.clone(),
-            open: vec![],
-        }
-    } else {
-        let (wn, hn) = ((k1 - k0 + 1) as usize, (l1 - l0 + 1) as usize);
-        let mut h = vec![0.0; wn * hn];
-        for (l, row) in h.chunks_mut(wn).enumerate() {
-            for (k, v) in row.iter_mut().enumerate() {
-                let (a, b) = (k as i64 + k0, l as i64 + l0);
-                *v = design.at(
-                    a.rem_euclid(design.nx as i64) as usize,
-                    b.rem_euclid(design.ny as i64) as usize,
-                );
+}
+
+impl Window {
+    /// The design under the interior plus two tool radii (CL needs one, the opening another), with its
+    /// opening: the whole tile when a periodic design's tile is no larger than that window, otherwise the
+    /// window's samples (wrapped for a periodic design, clipped to a non-periodic one; None when nothing
+    /// of it is left).
+    fn around(design: &Heightfield, sim: &Simulation, cells: &Interior, tool: &Shape) -> Option<Self> {
+        let (r, pd) = (tool.radius_mm(), design.pitch_mm);
+        let [x_lo, y_lo] = sim.cell_xy(cells.i_lo, cells.j_lo);
+        let [x_hi, y_hi] = sim.cell_xy(cells.i_hi, cells.j_hi);
+        let pad = 2.0 * r + 2.0 * pd;
+        let (mut k0, mut l0) = (((x_lo - pad) / pd).floor() as i64, ((y_lo - pad) / pd).floor() as i64);
+        let (mut k1, mut l1) = (((x_hi + pad) / pd).ceil() as i64, ((y_hi + pad) / pd).ceil() as i64);
+        let periodic_whole = design.periodic && (k1 - k0 + 1) * (l1 - l0 + 1) >= (design.nx * design.ny) as i64;
+        if !design.periodic {
+            k0 = k0.max(0);
+            l0 = l0.max(0);
+            k1 = k1.min(design.nx as i64 - 1);
+            l1 = l1.min(design.ny as i64 - 1);
+            if k1 < k0 || l1 < l0 {
+                return None;
             }
         }
-        Window {
-            nx: wn,
-            ny: hn,
-            k0,
-            l0,
-            periodic: false,
-            pitch: pd,
-            h,
-            open: vec![],
-        }
-    };
-    win.open = opening(&win.h, win.nx, win.ny, pd, win.periodic, tool);
-    let tol_mm = REACH_TOLERANCE_UM * 1e-3;
-
-    #[derive(Clone, Copy)]
-    struct Acc {
-        n: usize,
-        unreach: usize,
-        over: Extreme,
-        under: Extreme,
-        over_r: Extreme,
-        above_open: Extreme,
-        ss: f64,
-        nr: usize,
+        let mut win = if periodic_whole {
+            Window {
+                nx: design.nx,
+                ny: design.ny,
+                k0: 0,
+                l0: 0,
+                periodic: true,
+                pitch: pd,
+                h: design.z_mm.clone(),
+                open: vec![],
+            }
+        } else {
+            let (wn, hn) = ((k1 - k0 + 1) as usize, (l1 - l0 + 1) as usize);
+            let mut h = vec![0.0; wn * hn];
+            for (l, row) in h.chunks_mut(wn).enumerate() {
+                for (k, v) in row.iter_mut().enumerate() {
+                    let (a, b) = (k as i64 + k0, l as i64 + l0);
+                    *v = design.at(
+                        a.rem_euclid(design.nx as i64) as usize,
+                        b.rem_euclid(design.ny as i64) as usize,
+                    );
+                }
+            }
+            Window {
+                nx: wn,
+                ny: hn,
+                k0,
+                l0,
+                periodic: false,
+                pitch: pd,
+                h,
+                open: vec![],
+            }
+        };
+        win.open = opening(&win.h, win.nx, win.ny, pd, win.periodic, tool);
+        Some(win)
     }
-    let zero = Acc {
-        n: 0,
-        unreach: 0,
-        over: Extreme::none(),
-        under: Extreme::none(),
-        over_r: Extreme::none(),
-        above_open: Extreme::none(),
-        ss: 0.0,
-        nr: 0,
-    };
+}
+
+/// Running totals over assessed cells.
+#[derive(Clone, Copy)]
+struct Acc {
+    n: usize,
+    unreach: usize,
+    over: Extreme,
+    under: Extreme,
+    over_r: Extreme,
+    above_open: Extreme,
+    ss: f64,
+    nr: usize,
+}
+
+impl Acc {
+    fn zero() -> Self {
+        Self {
+            n: 0,
+            unreach: 0,
+            over: Extreme::none(),
+            under: Extreme::none(),
+            over_r: Extreme::none(),
+            above_open: Extreme::none(),
+            ss: 0.0,
+            nr: 0,
+        }
+    }
+
+    fn merge(self, b: Self) -> Self {
+        Self {
+            n: self.n + b.n,
+            unreach: self.unreach + b.unreach,
+            over: self.over.max(b.over),
+            under: self.under.max(b.under),
+            over_r: self.over_r.max(b.over_r),
+            above_open: self.above_open.max(b.above_open),
+            ss: self.ss + b.ss,
+            nr: self.nr + b.nr,
+        }
+    }
+}
+
+/// Fill the deviation map and reach flags over the interior (rows in parallel) and total them.
+fn compare(sim: &Simulation, win: &Window, cells: &Interior, map_um: &mut [f32], unreachable: &mut [bool]) -> Acc {
+    let hf = &sim.heightfield;
+    let tol_mm = REACH_TOLERANCE_UM * 1e-3;
     let nx = hf.nx;
-    let acc = dev
-        .map_um
+    map_um
         .par_chunks_mut(nx)
-        .zip(dev.unreachable.par_chunks_mut(nx))
+        .zip(unreachable.par_chunks_mut(nx))
         .enumerate()
-        .filter(|(j, _)| (j_lo..=j_hi).contains(j))
+        .filter(|(j, _)| (cells.j_lo..=cells.j_hi).contains(j))
         .map(|(j, (mrow, urow))| {
-            let mut a = zero;
-            for i in i_lo..=i_hi {
+            let mut a = Acc::zero();
+            for i in cells.i_lo..=cells.i_hi {
                 let at = sim.cell_xy(i, j);
                 let Some((c, tx, ty)) = win.corners(at[0], at[1]) else {
                     continue;
@@ -361,42 +405,59 @@ pub fn deviation(sim: &Simulation, design: &Heightfield, tool: &Shape) -> Deviat
             }
             a
         })
-        .reduce(
-            || zero,
-            |a, b| Acc {
-                n: a.n + b.n,
-                unreach: a.unreach + b.unreach,
-                over: a.over.max(b.over),
-                under: a.under.max(b.under),
-                over_r: a.over_r.max(b.over_r),
-                above_open: a.above_open.max(b.above_open),
-                ss: a.ss + b.ss,
-                nr: a.nr + b.nr,
-            },
-        );
-    if acc.n == 0 {
-        return dev;
-    }
-    let fin = |e: Extreme| {
-        if e.um.is_finite() {
-            (e.um, e.at_mm)
-        } else {
-            (f64::NAN, [f64::NAN; 2])
+        .reduce(Acc::zero, Acc::merge)
+}
+
+impl Deviation {
+    /// Nothing assessed yet: an empty map over the simulation's grid, every statistic NaN.
+    fn unassessed(sim: &Simulation, margin: f64) -> Self {
+        let hf = &sim.heightfield;
+        Self {
+            nx: hf.nx,
+            ny: hf.ny,
+            pitch_mm: hf.pitch_mm,
+            origin_mm: sim.origin_mm,
+            map_um: vec![f32::NAN; hf.nx * hf.ny],
+            unreachable: vec![false; hf.nx * hf.ny],
+            interior_margin_mm: margin,
+            interior_cells: 0,
+            unreachable_cells: 0,
+            unreachable_fraction: f64::NAN,
+            reach_tolerance_um: REACH_TOLERANCE_UM,
+            max_over_um: f64::NAN,
+            max_over_at_mm: [f64::NAN; 2],
+            max_under_um: f64::NAN,
+            max_under_at_mm: [f64::NAN; 2],
+            max_over_reachable_um: f64::NAN,
+            max_over_reachable_at_mm: [f64::NAN; 2],
+            max_above_opening_um: f64::NAN,
+            max_above_opening_at_mm: [f64::NAN; 2],
+            rms_reachable_um: f64::NAN,
         }
-    };
-    dev.interior_cells = acc.n;
-    dev.unreachable_cells = acc.unreach;
-    dev.unreachable_fraction = acc.unreach as f64 / acc.n as f64;
-    (dev.max_over_um, dev.max_over_at_mm) = fin(acc.over);
-    (dev.max_under_um, dev.max_under_at_mm) = fin(acc.under);
-    (dev.max_over_reachable_um, dev.max_over_reachable_at_mm) = fin(acc.over_r);
-    (dev.max_above_opening_um, dev.max_above_opening_at_mm) = fin(acc.above_open);
-    dev.rms_reachable_um = if acc.nr > 0 {
-        (acc.ss / acc.nr as f64).sqrt()
-    } else {
-        f64::NAN
-    };
-    dev
+    }
+
+    /// The statistics from the totals of a non-empty assessment.
+    fn record(&mut self, acc: &Acc) {
+        let fin = |e: Extreme| {
+            if e.um.is_finite() {
+                (e.um, e.at_mm)
+            } else {
+                (f64::NAN, [f64::NAN; 2])
+            }
+        };
+        self.interior_cells = acc.n;
+        self.unreachable_cells = acc.unreach;
+        self.unreachable_fraction = acc.unreach as f64 / acc.n as f64;
+        (self.max_over_um, self.max_over_at_mm) = fin(acc.over);
+        (self.max_under_um, self.max_under_at_mm) = fin(acc.under);
+        (self.max_over_reachable_um, self.max_over_reachable_at_mm) = fin(acc.over_r);
+        (self.max_above_opening_um, self.max_above_opening_at_mm) = fin(acc.above_open);
+        self.rms_reachable_um = if acc.nr > 0 {
+            (acc.ss / acc.nr as f64).sqrt()
+        } else {
+            f64::NAN
+        };
+    }
 }
 
 impl Deviation {

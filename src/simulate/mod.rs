@@ -418,7 +418,7 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
 /// The simulated surface as a closed solid for STL: the top through every `stride`-th cell centre (the stride
 /// chosen so that at most `max_side` samples lie along either side), vertical sides and a flat bottom
 /// `base_mm` below the lowest point. Coordinates in work mm.
-pub fn solid(sim: &Simulation, max_side: usize, base_mm: f64) -> Vec<crate::facets::stl::Triangle> {
+pub fn solid(sim: &Simulation, max_side: usize, base_mm: f64) -> Vec<crate::stl::Triangle> {
     use crate::geometry::Vec3;
     let hf = &sim.heightfield;
     let f = hf.nx.max(hf.ny).div_ceil(max_side.max(2)).max(1);
@@ -558,7 +558,7 @@ mod tests {
                 }
             }
             assert!(edges.values().all(|c| *c == 0), "open mesh at max_side {max_side}");
-            let v = crate::facets::stl::volume(&t);
+            let v = crate::stl::volume(&t);
             assert!(v > 0.0);
             if max_side == 1000 {
                 // full resolution: the volume of the cell-centre surface over the base
