@@ -30,7 +30,8 @@
 
 use brdfmill::heightfield::Heightfield;
 use brdfmill::npy::read_f64_2d;
-use brdfmill::toolpath::dropcutter::{Cutter, DropCutter, Edge};
+use brdfmill::tool::Shape;
+use brdfmill::toolpath::dropcutter::{DropCutter, Edge};
 use std::path::PathBuf;
 
 const PITCH: f64 = 0.02;
@@ -68,7 +69,7 @@ fn ball_on_samples_agrees_with_opencamlib_ball_on_triangles() {
     hf.z_mm = z;
     let (rows, cols, cl) = load("cl.npy");
     assert_eq!((rows, cols), (nx * ny + 400, 7));
-    let dc = DropCutter::new(&hf, Cutter::Ball { r: R }, Edge::Open);
+    let dc = DropCutter::new(&hf, Shape::Ball { diameter_mm: 2.0 * R }, Edge::Open);
     let grid = dc.surface();
 
     let (mut n_vertex, mut n_other) = (0, 0);
