@@ -241,8 +241,7 @@ impl Journal {
             path: path.to_path_buf(),
             source,
         })?;
-        let mut st = JournalState::default();
-        let mut answer_queue: std::collections::VecDeque<usize> = Default::default();
+        let mut replay = Replay::default();
         let all: Vec<&str> = text.lines().collect();
         for (i, l) in all.iter().enumerate() {
             let bad = |what: String| JournalError::Inconsistent {
@@ -255,78 +254,99 @@ impl Journal {
                 Err(_) if i + 1 == all.len() && !text.ends_with('\n') => break,
                 Err(e) => return Err(bad(format!("not a journal record: {e}"))),
             };
-            match &r {
-                Record::Start {
-                    version,
-                    fingerprint,
-                    lines,
-                    numbered,
-                    ..
-                } => {
-                    if *version != VERSION {
-                        return Err(bad(format!("version {version}, this build reads {VERSION}")));
-                    }
-                    if st.runs > 0 && *fingerprint != st.fingerprint {
-                        return Err(bad("a later run is for a different program".into()));
-                    }
-                    st.fingerprint = *fingerprint;
-                    st.lines = *lines;
-                    st.numbered = *numbered;
-                    st.runs += 1;
-                    st.stop = None;
-                    // A new connection: whatever was in flight before was either flushed or drained.
-                    answer_queue.clear();
-                }
-                Record::Sent { line } => {
-                    if st.runs == 0 {
-                        return Err(bad("record before the start record".into()));
-                    }
-                    if *line == 0 || *line > st.lines {
-                        return Err(bad(format!("line {line} is not in the program")));
-                    }
-                    st.sent.insert(*line);
-                    answer_queue.push_back(*line);
-                }
-                Record::Ok { line } | Record::Error { line, .. } => {
-                    if answer_queue.pop_front() != Some(*line) {
-                        return Err(bad(format!(
-                            "answer for line {line}, which is not the oldest line in flight"
-                        )));
-                    }
-                    if let Record::Error { code, .. } = r {
-                        st.errors.push((*line, code));
-                    } else {
-                        st.ok.insert(*line);
-                    }
-                }
-                Record::Executed { from, to } => {
-                    for n in *from..=*to {
-                        if !st.sent.contains(&n) {
-                            return Err(bad(format!("line {n} executed but never sent")));
-                        }
-                        if st.errors.iter().any(|&(l, _)| l == n) && !st.ok.contains(&n) {
-                            return Err(bad(format!("line {n} executed but was rejected")));
-                        }
-                        st.executed.insert(n);
-                    }
-                    if matches!(st.partial, Some((p, _)) if p >= *from && p <= *to) {
-                        st.partial = None;
-                    }
-                }
-                Record::Partial { line, at_mm } => {
-                    if !st.sent.contains(line) {
-                        return Err(bad(format!("line {line} partly executed but never sent")));
-                    }
-                    st.partial = Some((*line, *at_mm));
-                }
-                Record::Stop { .. } => {
-                    st.stop = Some(r.clone());
-                    answer_queue.clear();
-                }
-                Record::Complete => st.complete = true,
-            }
+            replay.apply(&r).map_err(bad)?;
         }
-        Ok(st)
+        Ok(replay.st)
+    }
+}
+
+/// A journal being replayed: the state so far and the lines sent but not yet answered, oldest first.
+#[derive(Debug, Default)]
+struct Replay {
+    st: JournalState,
+    in_flight: std::collections::VecDeque<usize>,
+}
+
+impl Replay {
+    /// Apply one record; `Err` says how it contradicts the records before it.
+    fn apply(&mut self, r: &Record) -> Result<(), String> {
+        let st = &mut self.st;
+        match r {
+            Record::Start {
+                version,
+                fingerprint,
+                lines,
+                numbered,
+                ..
+            } => {
+                if *version != VERSION {
+                    return Err(format!("version {version}, this build reads {VERSION}"));
+                }
+                if st.runs > 0 && *fingerprint != st.fingerprint {
+                    return Err("a later run is for a different program".into());
+                }
+                st.fingerprint = *fingerprint;
+                st.lines = *lines;
+                st.numbered = *numbered;
+                st.runs += 1;
+                st.stop = None;
+                // A new connection: whatever was in flight before was either flushed or drained.
+                self.in_flight.clear();
+            }
+            Record::Sent { line } => {
+                if st.runs == 0 {
+                    return Err("record before the start record".into());
+                }
+                if *line == 0 || *line > st.lines {
+                    return Err(format!("line {line} is not in the program"));
+                }
+                st.sent.insert(*line);
+                self.in_flight.push_back(*line);
+            }
+            Record::Ok { line } | Record::Error { line, .. } => {
+                if self.in_flight.pop_front() != Some(*line) {
+                    return Err(format!(
+                        "answer for line {line}, which is not the oldest line in flight"
+                    ));
+                }
+                if let Record::Error { code, .. } = r {
+                    st.errors.push((*line, *code));
+                } else {
+                    st.ok.insert(*line);
+                }
+            }
+            Record::Executed { from, to } => self.executed(*from, *to)?,
+            Record::Partial { line, at_mm } => {
+                if !st.sent.contains(line) {
+                    return Err(format!("line {line} partly executed but never sent"));
+                }
+                st.partial = Some((*line, *at_mm));
+            }
+            Record::Stop { .. } => {
+                st.stop = Some(r.clone());
+                self.in_flight.clear();
+            }
+            Record::Complete => st.complete = true,
+        }
+        Ok(())
+    }
+
+    /// Lines `from..=to` executed: each must have been sent and not only rejected.
+    fn executed(&mut self, from: usize, to: usize) -> Result<(), String> {
+        let st = &mut self.st;
+        for n in from..=to {
+            if !st.sent.contains(&n) {
+                return Err(format!("line {n} executed but never sent"));
+            }
+            if st.errors.iter().any(|&(l, _)| l == n) && !st.ok.contains(&n) {
+                return Err(format!("line {n} executed but was rejected"));
+            }
+            st.executed.insert(n);
+        }
+        if matches!(st.partial, Some((p, _)) if p >= from && p <= to) {
+            st.partial = None;
+        }
+        Ok(())
     }
 }
 

@@ -1,0 +1,275 @@
+//! The controller itself, with no I/O and no clock: its state (idle, running, alarm, check mode; feed
+//! hold), the 128-byte receive buffer and the realtime bytes that bypass it, soft reset and alarms, and
+//! GRBL's main loop, which serves the line waiting on the planner and then reads the next lines out of the
+//! receive buffer and hands them to the `$` commands or the G-code interpreter.
+
+use std::collections::{BTreeMap, VecDeque};
+
+use super::fault::{Fault, FaultKind};
+use super::line_reader::{LineReader, ReadLine};
+use super::planner::{Block, Served, Waiting};
+use super::system::default_settings;
+use super::{EmulatorConfig, EmulatorLog, VERSION};
+use crate::stream::program::Modal;
+use crate::stream::protocol::{Realtime, RX_BUFFER_BYTES};
+
+/// GRBL's machine state, as far as it is modelled (a feed hold is the separate `hold` flag).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(super) enum State {
+    Idle,
+    Run,
+    Alarm,
+    Check,
+}
+
+/// The virtual GRBL 1.1 controller, with no I/O: feed it bytes ([`Controller::receive`]), advance
+/// simulated time ([`Controller::advance`]), take what it sends ([`Controller::take_output`]).
+#[derive(Debug)]
+pub struct Controller {
+    pub(super) line_numbers: bool,
+    pub(super) settings: BTreeMap<u16, f64>,
+    pub(super) state: State,
+    /// Waiting for a soft reset after a critical alarm.
+    pub(super) critical: bool,
+    pub(super) hold: bool,
+    pub(super) rx: VecDeque<u8>,
+    pub(super) reader: LineReader,
+    pub(super) waiting: Option<Waiting>,
+    pub(super) planner: VecDeque<Block>,
+    pub(super) pos: [f64; 3],
+    pub(super) parser_pos: [f64; 3],
+    pub(super) modal: Modal,
+    pub(super) out: Vec<u8>,
+    pub(super) log: EmulatorLog,
+    pub(super) faults: Vec<(Fault, bool)>,
+    pub(super) received: usize,
+    pub(super) disconnect: bool,
+    pub(super) feed_override: u8,
+    pub(super) sim_time_s: f64,
+    pub(super) wco_counter: u8,
+    pub(super) ovr_pending: bool,
+}
+
+impl Controller {
+    /// A controller just powered up (its banner queued for output).
+    #[must_use]
+    pub fn new(cfg: &EmulatorConfig) -> Controller {
+        let mut settings = default_settings();
+        for &(k, v) in &cfg.settings {
+            settings.insert(k, v);
+        }
+        let mut c = Controller {
+            line_numbers: cfg.line_numbers,
+            settings,
+            state: State::Idle,
+            critical: false,
+            hold: false,
+            rx: VecDeque::with_capacity(RX_BUFFER_BYTES),
+            reader: LineReader::new(),
+            waiting: None,
+            planner: VecDeque::new(),
+            pos: [0.0; 3],
+            parser_pos: [0.0; 3],
+            modal: Modal::default(),
+            out: Vec::new(),
+            log: EmulatorLog::default(),
+            faults: cfg.faults.iter().map(|&f| (f, false)).collect(),
+            received: 0,
+            disconnect: false,
+            feed_override: 100,
+            sim_time_s: 0.0,
+            wco_counter: 0,
+            ovr_pending: false,
+        };
+        if c.setting(22) == 1.0 {
+            c.state = State::Alarm; // HOMING_INIT_LOCK
+        }
+        c.banner();
+        c
+    }
+
+    /// Setting `$n` (0 when unknown).
+    pub(super) fn setting(&self, n: u16) -> f64 {
+        self.settings.get(&n).copied().unwrap_or(0.0)
+    }
+
+    /// Send one line to the host.
+    pub(super) fn say(&mut self, s: &str) {
+        self.out.extend_from_slice(s.as_bytes());
+        self.out.extend_from_slice(b"\r\n");
+    }
+
+    fn banner(&mut self) {
+        self.out.extend_from_slice(b"\r\n");
+        self.say(&format!("Grbl {VERSION} ['$' for help]"));
+        if self.state == State::Alarm {
+            self.say("[MSG:'$H'|'$X' to unlock]");
+        }
+    }
+
+    /// Bytes to send to the host (drained).
+    pub fn take_output(&mut self) -> Vec<u8> {
+        std::mem::take(&mut self.out)
+    }
+
+    /// The log entries since the last call (drained).
+    pub fn take_log(&mut self) -> EmulatorLog {
+        std::mem::take(&mut self.log)
+    }
+
+    /// An injected disconnect fired: the link layer must drop the link (cleared by this call).
+    pub fn take_disconnect(&mut self) -> bool {
+        std::mem::take(&mut self.disconnect)
+    }
+
+    /// The link dropped: a partial line in the reader is discarded, pending output is lost.
+    pub fn link_lost(&mut self) {
+        self.reader.clear();
+        // A partial line still in the receive buffer (no newline yet) can never complete safely.
+        if let Some(last_nl) = self.rx.iter().rposition(|&b| b == b'\n' || b == b'\r') {
+            self.rx.truncate(last_nl + 1);
+        } else {
+            self.rx.clear();
+        }
+        self.out.clear();
+    }
+
+    /// Machine position, mm.
+    #[must_use]
+    pub fn position(&self) -> [f64; 3] {
+        self.pos
+    }
+
+    /// One byte arrived from the host.
+    pub fn receive(&mut self, b: u8) {
+        self.log.bytes_in += 1;
+        match b {
+            b'?' => self.status_report(),
+            b'!' => {
+                if self.state == State::Run && !self.planner.is_empty() {
+                    self.hold = true;
+                }
+            }
+            b'~' => {
+                if self.hold {
+                    self.hold = false;
+                }
+                if self.state == State::Idle && !self.planner.is_empty() {
+                    self.state = State::Run;
+                }
+            }
+            0x18 => self.soft_reset(),
+            0x90 => self.feed_override = 100,
+            0x91 => self.feed_override = (self.feed_override + 10).min(200),
+            0x92 => self.feed_override = self.feed_override.saturating_sub(10).max(10),
+            0x93 => self.feed_override = (self.feed_override + 1).min(200),
+            0x94 => self.feed_override = self.feed_override.saturating_sub(1).max(10),
+            b if Realtime::is_realtime(b) => {}
+            _ => {
+                if self.rx.len() >= RX_BUFFER_BYTES - 1 {
+                    self.log.rx_overflows += 1;
+                    self.log.events.push(format!(
+                        "RX buffer overflow: byte {b:#04x} dropped ({} bytes buffered)",
+                        self.rx.len()
+                    ));
+                } else {
+                    self.rx.push_back(b);
+                }
+            }
+        }
+    }
+
+    /// Ctrl-X: stop, flush the receive buffer and planner, reset the parser, print the banner. A reset while
+    /// moving or holding raises `ALARM:3` (GRBL's `mc_reset`).
+    pub(super) fn soft_reset(&mut self) {
+        let moving = (self.state == State::Run || self.hold) && !self.planner.is_empty() && !self.critical;
+        self.flush_motion();
+        self.rx.clear();
+        self.reader.clear();
+        self.critical = false;
+        self.modal = Modal::default();
+        self.feed_override = 100;
+        if moving {
+            self.say("ALARM:3");
+            self.log.events.push("ALARM:3 (reset while in motion)".into());
+            self.state = State::Alarm;
+        } else if self.state != State::Alarm {
+            self.state = State::Idle;
+        }
+        self.log.events.push("soft reset".into());
+        self.wco_counter = 0;
+        self.banner();
+    }
+
+    /// Stop at once and lock with `ALARM:code` until a soft reset (soft-limit behaviour).
+    pub(super) fn alarm(&mut self, code: u16) {
+        // Motion stops here; the planner is only cleared by the reset that ends the lock, so status
+        // reports until then still name the block that was executing (`Ln`), as in GRBL.
+        self.hold = false;
+        self.waiting = None;
+        self.state = State::Alarm;
+        self.critical = true;
+        self.say(&format!("ALARM:{code}"));
+        self.say("[MSG:Reset to continue]");
+        self.log.events.push(format!("ALARM:{code}"));
+    }
+
+    /// GRBL's main loop: finish what the last line waits for, then read lines from the receive buffer.
+    pub(super) fn main_loop(&mut self) {
+        loop {
+            if self.critical {
+                return;
+            }
+            match self.serve_waiting() {
+                Served::Blocked => return,
+                Served::Again => continue,
+                Served::Done => {}
+            }
+            let Some(c) = self.rx.pop_front() else {
+                self.start_cycle(); // protocol_auto_cycle_start when the receive buffer is empty
+                return;
+            };
+            if let Some(line) = self.reader.push(c) {
+                self.execute_line(line);
+            }
+        }
+    }
+
+    /// A complete line: an overflow or an injected fault answers it, else a `$` command or G-code runs.
+    fn execute_line(&mut self, line: ReadLine) {
+        let ReadLine { text, overflow } = line;
+        if overflow {
+            self.say("error:11");
+            return;
+        }
+        if text.is_empty() {
+            self.say("ok");
+            return;
+        }
+        self.received += 1;
+        self.log.received.push(text.clone());
+        let mut disconnect_after = false;
+        match self.fire_fault(&text) {
+            Some(FaultKind::Error(code)) => {
+                self.say(&format!("error:{code}"));
+                return;
+            }
+            Some(FaultKind::Alarm(code)) => {
+                self.alarm(code);
+                return;
+            }
+            Some(FaultKind::Disconnect) => disconnect_after = true,
+            None => {}
+        }
+        if text.starts_with('$') {
+            self.system_command(&text);
+        } else if self.state == State::Alarm {
+            self.say("error:9");
+        } else if let Err(code) = self.gcode(&text) {
+            self.say(&format!("error:{code}"));
+        }
+        if disconnect_after {
+            self.disconnect = true;
+        }
+    }
+}

@@ -1,0 +1,82 @@
+//! Injected faults: an `error:N` instead of running a line, an alarm that stops motion at once, or a
+//! dropped link after the line. Each fires once, on the first line that matches it (see the module
+//! documentation of [`emulator`](super) for what each does to the controller).
+
+use super::controller::Controller;
+use super::line_reader::leading_line_number;
+
+/// A fault to inject.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fault {
+    /// Which line triggers it.
+    pub at: FaultAt,
+    /// What happens.
+    pub kind: FaultKind,
+}
+
+/// Which line triggers a fault.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FaultAt {
+    /// The first block carrying `N<n>`.
+    LineNumber(u32),
+    /// The `k`-th non-empty line received (1-based, counting every line since start).
+    Received(usize),
+}
+
+/// What an injected fault does.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum FaultKind {
+    /// Answer `error:code` instead of running the line.
+    Error(u16),
+    /// Stop and raise `ALARM:code` (soft-limit behaviour).
+    Alarm(u16),
+    /// Run the line, then drop the link.
+    Disconnect,
+}
+
+impl std::str::FromStr for Fault {
+    type Err = String;
+    /// `N:error[:code]`, `N:alarm[:code]`, `N:disconnect` (N a line number `N` word).
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let parts: Vec<&str> = s.split(':').collect();
+        let n: u32 = parts
+            .first()
+            .and_then(|n| n.parse().ok())
+            .ok_or_else(|| format!("fault `{s}`: expected LINE:KIND[:CODE], LINE a line number"))?;
+        let code = |d: u16| -> Result<u16, String> {
+            parts
+                .get(2)
+                .map_or(Ok(d), |c| c.parse().map_err(|_| format!("fault `{s}`: bad code")))
+        };
+        let kind = match parts.get(1).copied() {
+            Some("error") => FaultKind::Error(code(20)?),
+            Some("alarm") => FaultKind::Alarm(code(2)?),
+            Some("disconnect") => FaultKind::Disconnect,
+            _ => return Err(format!("fault `{s}`: kind must be error, alarm or disconnect")),
+        };
+        Ok(Fault {
+            at: FaultAt::LineNumber(n),
+            kind,
+        })
+    }
+}
+
+impl Controller {
+    /// The first fault not yet fired that `text` (the `received`-th line) triggers, marked fired and
+    /// logged.
+    pub(super) fn fire_fault(&mut self, text: &str) -> Option<FaultKind> {
+        let n = leading_line_number(text);
+        let received = self.received;
+        let (f, done) = self.faults.iter_mut().find(|(f, done)| {
+            !*done
+                && match f.at {
+                    FaultAt::LineNumber(k) => n == Some(k),
+                    FaultAt::Received(k) => k == received,
+                }
+        })?;
+        *done = true;
+        let kind = f.kind;
+        self.log.events.push(format!("fault fired at `{text}`: {kind:?}"));
+        Some(kind)
+    }
+}

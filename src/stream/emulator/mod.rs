@@ -1,0 +1,137 @@
+//! A virtual GRBL 1.1 controller, for tests and for dry runs (`brdfmill emulate`).
+//!
+//! Two layers:
+//! - [`Controller`]: the controller itself with no I/O and no clock — bytes in, bytes out, simulated time
+//!   advanced by the caller. It models GRBL 1.1's 128-byte receive buffer (an overflow is counted and
+//!   logged, never hidden), realtime commands (`?`, `!`, `~`, Ctrl-X, feed overrides), the line reader
+//!   (comments and spaces stripped, 79-character limit → `error:11`), the G-code subset below with GRBL's
+//!   error codes, a 15-block planner that executes blocks at their programmed feed in simulated time,
+//!   status reports (`MPos`/`WPos`, `Bf`, `Ln`, `FS`, `WCO`, `Ov`), `$C` check mode, `$$`/`$x=`/`$I`/
+//!   `$G`/`$#`/`$X`/`$H`, soft limits raising `ALARM:2`, and injected faults.
+//! - [`Emulator`]: runs a controller on a pseudo-terminal in its own thread, pacing bytes both ways at the
+//!   configured baud (10 bits per byte, 8N1) and running motion `time_scale` times faster than real time.
+//!
+//! Modelled G-code: G0 G1 G2 G3 (I/J form, G17 plane) G4 G17 G18 G19 G20 G21 G54 G80 G90 G91 G94,
+//! M0 M1 M2 M30 M3 M4 M5 M7 M8 M9, F S T N P words. Not modelled (answered `error:20`, and logged as such):
+//! G10 G28 G30 G53 G92 G38.x G43.1 G49 G61 G93 G55–G59, arcs in R form or other planes; `$J=` and `$SLP`
+//! (answered `error:3`). Motion has no acceleration: a block takes `length / feed` and a feed hold stops
+//! at once, where a real GRBL decelerates over up to `v²/2a`.
+//!
+//! **Faults** ([`Fault`]) fire once, on the first line carrying line number `N` (or the `k`-th line
+//! received): `error` answers `error:code` instead of running the line; `alarm` stops motion at once and
+//! raises `ALARM:code` the way a soft limit does (position retained, `[MSG:Reset to continue]`, nothing runs
+//! until a soft reset); `disconnect` runs the line and then drops the link — the controller keeps executing
+//! what is already complete in its receive buffer and planner (a board with its own power supply), discards
+//! a partial line, and opens a new pseudo-terminal after `reconnect_delay`.
+//!
+//! One file per concept, as in GRBL's own sources:
+//! - `controller`: the [`Controller`] state, the realtime bytes and the receive buffer, resets and alarms,
+//!   and the main loop that hands complete lines to the rest;
+//! - `line_reader`: GRBL's serial line reader (`protocol.c`): comments, spaces, upper case, 79 characters;
+//! - `interpreter`: the G-code parser and its error codes (`gcode.c`), on [`program::words`] and
+//!   [`program::Modal`](crate::stream::program::Modal);
+//! - `planner`: motion blocks, the 15-block planner, synchronised commands and dwells, simulated motion;
+//! - `system`: the `$` commands and the settings (`system.c`, `settings.c`);
+//! - `status`: the `?` status report (`report.c`);
+//! - `fault`: injected faults ([`Fault`]);
+//! - `pty`: the [`Emulator`], a controller on a pseudo-terminal in its own thread, with a paced line.
+//!
+//! [`program::words`]: crate::stream::program::words
+
+mod controller;
+mod fault;
+mod interpreter;
+mod line_reader;
+mod planner;
+mod pty;
+mod status;
+mod system;
+#[cfg(test)]
+mod tests;
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+pub use controller::Controller;
+pub use fault::{Fault, FaultAt, FaultKind};
+pub use pty::Emulator;
+
+/// The version the emulator announces.
+pub const VERSION: &str = "1.1h";
+
+/// Emulator settings.
+#[derive(Debug, Clone)]
+pub struct EmulatorConfig {
+    /// Serial speed (bits/s) whose byte rate (baud/10 bytes/s) paces both directions.
+    pub baud: u32,
+    /// Simulated motion runs this many times faster than real time (1.0 = real time).
+    pub time_scale: f64,
+    /// Report `Ln` (GRBL built with `USE_LINE_NUMBERS`, as `[OPT:N…]` announces).
+    pub line_numbers: bool,
+    /// Settings changed from GRBL's defaults at power-up, e.g. `(10, 3.0)` to report `Bf`.
+    pub settings: Vec<(u16, f64)>,
+    /// Injected faults.
+    pub faults: Vec<Fault>,
+    /// After an injected disconnect, how long until the new pseudo-terminal opens.
+    pub reconnect_delay: Duration,
+    /// Keep a symbolic link here pointing at the current pseudo-terminal.
+    pub link_path: Option<PathBuf>,
+}
+
+impl Default for EmulatorConfig {
+    fn default() -> Self {
+        EmulatorConfig {
+            baud: 115_200,
+            time_scale: 1.0,
+            line_numbers: true,
+            settings: Vec::new(),
+            faults: Vec::new(),
+            reconnect_delay: Duration::from_millis(50),
+            link_path: None,
+        }
+    }
+}
+
+/// A piece of a motion block that the simulated machine executed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Piece {
+    /// The block's line number (`N`), 0 when it had none.
+    pub line: u32,
+    /// Where the piece started (machine coordinates, mm).
+    pub from_mm: [f64; 3],
+    /// Where it ended.
+    pub to_mm: [f64; 3],
+    /// The block ran to its end (false: cut short by a reset or an alarm).
+    pub complete: bool,
+}
+
+/// What the controller saw and did.
+#[derive(Debug, Clone, Default)]
+pub struct EmulatorLog {
+    /// Every non-realtime line received, cleaned, in order.
+    pub received: Vec<String>,
+    /// Executed motion, in order.
+    pub executed: Vec<Piece>,
+    /// Bytes dropped because the receive buffer was full (a streaming bug: must stay 0).
+    pub rx_overflows: u64,
+    /// Notable events (alarms, resets, faults fired, unmodelled commands, overflows).
+    pub events: Vec<String>,
+    /// Bytes received (including realtime bytes).
+    pub bytes_in: u64,
+    /// Bytes sent.
+    pub bytes_out: u64,
+}
+
+impl EmulatorLog {
+    fn append(&mut self, other: &mut EmulatorLog) {
+        self.received.append(&mut other.received);
+        self.executed.append(&mut other.executed);
+        self.rx_overflows += other.rx_overflows;
+        self.events.append(&mut other.events);
+        self.bytes_in += other.bytes_in;
+        self.bytes_out += other.bytes_out;
+        other.rx_overflows = 0;
+        other.bytes_in = 0;
+        other.bytes_out = 0;
+    }
+}

@@ -1,0 +1,240 @@
+//! Motion: the blocks the interpreter makes (lines and I/J arcs, timed at their feed with no acceleration
+//! and limited by each axis' maximum rate), GRBL's 15-block planner, the commands that wait for it to empty
+//! (spindle, coolant, dwell, program end), and simulated execution — the machine position moving along
+//! the head block as simulated time advances, each finished or cut piece logged.
+
+use super::controller::{Controller, State};
+use super::Piece;
+use crate::stream::protocol::PLANNER_BLOCKS;
+
+/// How a block moves: straight at the rapid rate, straight at its feed, or along an I/J arc in G17.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) enum BlockKind {
+    Rapid,
+    Linear,
+    Arc { center: [f64; 2], cw: bool },
+}
+
+/// A planned motion block, in machine coordinates (mm).
+#[derive(Debug, Clone)]
+pub(super) struct Block {
+    pub(super) line: u32,
+    pub(super) from: [f64; 3],
+    pub(super) to: [f64; 3],
+    pub(super) kind: BlockKind,
+    /// Simulated seconds at 100 % override.
+    pub(super) duration_s: f64,
+    /// Simulated seconds done.
+    pub(super) elapsed_s: f64,
+    pub(super) feed_mm_min: f64,
+}
+
+impl Block {
+    fn at(&self, t: f64) -> [f64; 3] {
+        let t = t.clamp(0.0, 1.0);
+        let z = self.from[2] + (self.to[2] - self.from[2]) * t;
+        match self.kind {
+            BlockKind::Arc { center, cw } => {
+                let (a0, sweep) = arc_sweep(self.from, self.to, center, cw);
+                let r = ((self.from[0] - center[0]).powi(2) + (self.from[1] - center[1]).powi(2)).sqrt();
+                let a = a0 + sweep * t;
+                if t >= 1.0 {
+                    self.to
+                } else {
+                    [center[0] + r * a.cos(), center[1] + r * a.sin(), z]
+                }
+            }
+            _ => std::array::from_fn(|i| self.from[i] + (self.to[i] - self.from[i]) * t),
+        }
+    }
+}
+
+/// Start angle and signed sweep of an arc (full circle when start = end).
+fn arc_sweep(from: [f64; 3], to: [f64; 3], c: [f64; 2], cw: bool) -> (f64, f64) {
+    let a0 = (from[1] - c[1]).atan2(from[0] - c[0]);
+    let a1 = (to[1] - c[1]).atan2(to[0] - c[0]);
+    let mut sweep = a1 - a0;
+    if cw {
+        if sweep >= -1e-9 {
+            sweep -= std::f64::consts::TAU;
+        }
+    } else if sweep <= 1e-9 {
+        sweep += std::f64::consts::TAU;
+    }
+    (a0, sweep)
+}
+
+/// What a parsed line waits for before its `ok`.
+#[derive(Debug, Clone)]
+pub(super) enum Waiting {
+    /// A motion block waiting for planner space.
+    Plan(Block),
+    /// A spindle/coolant change or dwell waiting for the planner to empty (GRBL synchronises them), then
+    /// the block's own motion, if any.
+    Sync { dwell_s: f64, then: Option<Block> },
+    /// Dwelling until this simulated time, then the block's motion.
+    Dwell { until_s: f64, then: Option<Block> },
+}
+
+/// What serving the waiting line came to.
+pub(super) enum Served {
+    /// It still waits (planner full, not yet empty, dwelling).
+    Blocked,
+    /// It moved on to its next stage: serve it again.
+    Again,
+    /// It was answered `ok` (or nothing was waiting): read the next line.
+    Done,
+}
+
+impl Controller {
+    /// A motion block from the parser position to `to`, timed at its feed (no acceleration) and limited
+    /// by each axis' maximum rate (`$110`–`$112`, mm/min).
+    pub(super) fn block(&self, kind: BlockKind, to: [f64; 3], feed_mm_min: f64, line: u32) -> Block {
+        let from = self.parser_pos;
+        let d: Vec<f64> = (0..3).map(|i| to[i] - from[i]).collect();
+        let axis_limited = (0..3)
+            .map(|i| d[i].abs() / (self.setting(110 + i as u16).max(1e-9) / 60.0))
+            .fold(0.0, f64::max);
+        let length = match kind {
+            BlockKind::Arc { center, cw } => {
+                let (_, sweep) = arc_sweep(from, to, center, cw);
+                let r = ((from[0] - center[0]).powi(2) + (from[1] - center[1]).powi(2)).sqrt();
+                ((r * sweep).powi(2) + d[2].powi(2)).sqrt()
+            }
+            _ => (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(),
+        };
+        let duration_s = match kind {
+            BlockKind::Rapid => axis_limited,
+            _ => (length / (feed_mm_min / 60.0)).max(axis_limited),
+        };
+        Block {
+            line,
+            from,
+            to,
+            kind,
+            duration_s: if length < 1e-9 { 0.0 } else { duration_s },
+            elapsed_s: 0.0,
+            feed_mm_min,
+        }
+    }
+
+    /// Advance simulated time by `dt_s` seconds: execute motion, finish dwells, run the main loop.
+    pub fn advance(&mut self, dt_s: f64) {
+        self.sim_time_s += dt_s;
+        self.run_motion(dt_s);
+        if self.state == State::Run && self.planner.is_empty() {
+            self.state = State::Idle;
+        }
+        self.main_loop();
+    }
+
+    /// Execute `dt` simulated seconds of the planner's blocks (unless holding or locked).
+    fn run_motion(&mut self, mut dt: f64) {
+        while dt > 0.0 && self.state == State::Run && !self.hold && !self.critical {
+            let Some(b) = self.planner.front_mut() else { break };
+            let f = if b.kind == BlockKind::Rapid {
+                1.0
+            } else {
+                f64::from(self.feed_override) / 100.0
+            };
+            let remaining = (b.duration_s - b.elapsed_s) / f;
+            if dt >= remaining {
+                dt -= remaining;
+                let b = self.planner.pop_front().expect("front exists");
+                self.pos = b.to;
+                self.log.executed.push(Piece {
+                    line: b.line,
+                    from_mm: b.from,
+                    to_mm: b.to,
+                    complete: true,
+                });
+            } else {
+                b.elapsed_s += dt * f;
+                self.pos = b.at(b.elapsed_s / b.duration_s);
+                dt = 0.0;
+            }
+        }
+    }
+
+    /// Serve the line whose `ok` waits on the planner: plan its block when there is room, start its
+    /// synchronised command once the planner has emptied, finish its dwell.
+    pub(super) fn serve_waiting(&mut self) -> Served {
+        let Some(w) = self.waiting.take() else {
+            return Served::Done;
+        };
+        match w {
+            Waiting::Plan(b) => {
+                if self.planner_full() {
+                    self.start_cycle();
+                    self.waiting = Some(Waiting::Plan(b));
+                    return Served::Blocked;
+                }
+                self.planner.push_back(b);
+                self.say("ok");
+            }
+            Waiting::Sync { dwell_s, then } => {
+                if !self.planner.is_empty() {
+                    self.start_cycle();
+                    self.waiting = Some(Waiting::Sync { dwell_s, then });
+                    return Served::Blocked;
+                }
+                self.waiting = Some(Waiting::Dwell {
+                    until_s: self.sim_time_s + dwell_s,
+                    then,
+                });
+                return Served::Again;
+            }
+            Waiting::Dwell { until_s, then } => {
+                if self.sim_time_s < until_s {
+                    self.waiting = Some(Waiting::Dwell { until_s, then });
+                    return Served::Blocked;
+                }
+                match then {
+                    Some(b) => {
+                        self.waiting = Some(Waiting::Plan(b));
+                        return Served::Again;
+                    }
+                    None => self.say("ok"),
+                }
+            }
+        }
+        if self.planner_full() {
+            self.start_cycle();
+        }
+        Served::Done
+    }
+
+    fn planner_full(&self) -> bool {
+        self.planner.len() >= PLANNER_BLOCKS as usize
+    }
+
+    /// Start the cycle (GRBL's auto cycle start) when there is motion to run and no feed hold.
+    pub(super) fn start_cycle(&mut self) {
+        if self.state == State::Idle && !self.planner.is_empty() && !self.hold {
+            self.state = State::Run;
+        }
+    }
+
+    /// Log the head block's executed part when motion is cut short.
+    fn log_partial_head(&mut self) {
+        if let Some(b) = self.planner.front() {
+            if b.elapsed_s > 0.0 {
+                self.log.executed.push(Piece {
+                    line: b.line,
+                    from_mm: b.from,
+                    to_mm: self.pos,
+                    complete: false,
+                });
+            }
+        }
+    }
+
+    /// Throw away all planned and waiting motion (a reset): the parser continues from where the tool is.
+    pub(super) fn flush_motion(&mut self) {
+        self.log_partial_head();
+        self.planner.clear();
+        self.waiting = None;
+        self.hold = false;
+        self.parser_pos = self.pos;
+    }
+}

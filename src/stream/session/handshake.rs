@@ -1,0 +1,292 @@
+//! Before a job: wake the controller and make sure it is GRBL 1.1 (`$I`, then a status report), learn its
+//! receive buffer and whether it reports line numbers, and wait until it is idle (unlocking an alarm only
+//! when allowed). Also the small exchanges used around a job: a command sent alone and waited for, a
+//! soft reset and its banner, and polling until the controller has settled.
+
+use std::sync::atomic::Ordering;
+use std::time::{Duration, Instant};
+
+use super::{Session, StreamError};
+use crate::stream::protocol::{error_text, parse_response, MachineState, Realtime, Response, Status, RX_BUFFER_BYTES};
+
+/// What the handshake learned.
+#[derive(Debug, Clone)]
+pub(super) struct Info {
+    pub(super) rx_bytes: usize,
+    pub(super) line_numbers: bool,
+    pub(super) status: Option<Status>,
+    pub(super) critical: bool,
+}
+
+/// Where the `$I` probe stands.
+#[derive(Debug, Default)]
+struct Probe {
+    sent: bool,
+    got_ver: bool,
+    got_opt: bool,
+    reset_sent: bool,
+    first_status_at: Option<Instant>,
+    resend_at: Option<Instant>,
+}
+
+impl Session<'_> {
+    /// Wake the controller and identify it: `\r\n\r\n`, then `$I` (expects `[VER:1.1…]`, `[OPT:…]`, `ok`)
+    /// and `?`. A banner in between means the board just reset: the probe is repeated. A controller
+    /// locked in a critical alarm answers only `?`; it is soft-reset once (motion has stopped in alarm).
+    pub(super) fn handshake(&mut self) -> Result<Info, StreamError> {
+        let deadline = Instant::now() + self.cfg.handshake_timeout;
+        let mut info = Info {
+            rx_bytes: RX_BUFFER_BYTES,
+            line_numbers: false,
+            status: None,
+            critical: false,
+        };
+        self.write(b"\r\n\r\n").map_err(|f| self.link_err("wake-up", f))?;
+        let mut probe = Probe::default();
+        loop {
+            if probe.resend_at.is_some_and(|t| Instant::now() >= t) {
+                probe.resend_at = None;
+                probe.sent = false;
+            }
+            if self.stop.load(Ordering::SeqCst) {
+                return Err(StreamError::Interrupted);
+            }
+            if !probe.sent {
+                self.write(b"$I\n?").map_err(|f| self.link_err("handshake", f))?;
+                probe.sent = true;
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(self.not_grbl());
+            }
+            let line = self
+                .read_line((deadline - now).min(Duration::from_millis(100)))
+                .map_err(|f| self.link_err("handshake", f))?;
+            match line {
+                None => self.reset_if_locked(&mut probe, &mut info)?,
+                Some(line) => {
+                    if self.probe_answer(&line, &mut probe, &mut info)? {
+                        return self.first_status(deadline, info);
+                    }
+                }
+            }
+        }
+    }
+
+    fn not_grbl(&self) -> StreamError {
+        StreamError::NotGrbl {
+            port: self.port(),
+            timeout: self.cfg.handshake_timeout,
+            saw: self.saw.clone(),
+        }
+    }
+
+    /// Nothing came: a controller locked in a critical alarm does not process `$I`, but answers `?`.
+    /// After half a second of that, soft-reset it once.
+    fn reset_if_locked(&mut self, probe: &mut Probe, info: &mut Info) -> Result<(), StreamError> {
+        if let (Some(t), Some(st)) = (probe.first_status_at, &info.status) {
+            if st.state == Some(MachineState::Alarm) && !probe.reset_sent && t.elapsed() > Duration::from_millis(500) {
+                self.write(&[Realtime::SoftReset.byte()])
+                    .map_err(|f| self.link_err("reset", f))?;
+                probe.reset_sent = true;
+                info.critical = true;
+            }
+        }
+        Ok(())
+    }
+
+    /// One line answering the probe. Returns true on `$I`'s own `ok` (after `[VER:]` and `[OPT:]`).
+    fn probe_answer(&mut self, line: &str, probe: &mut Probe, info: &mut Info) -> Result<bool, StreamError> {
+        match parse_response(line) {
+            Response::Banner(_) => {
+                // A (re)start — or a banner printed before the port was opened. If the probe was lost
+                // in a reset, ask again, but only once it is clear no answer is coming: a second `$I`
+                // whose `ok` arrived during streaming would be taken for a program line's.
+                probe.got_ver = false;
+                probe.got_opt = false;
+                probe.resend_at = Some(Instant::now() + Duration::from_millis(1500));
+            }
+            Response::Feedback(f) if f.starts_with("VER:") => {
+                if !f.starts_with("VER:1.1") {
+                    return Err(StreamError::NotGrbl {
+                        port: self.port(),
+                        timeout: self.cfg.handshake_timeout,
+                        saw: format!("[{f}] (GRBL other than 1.1)"),
+                    });
+                }
+                probe.got_ver = true;
+                probe.resend_at = None;
+            }
+            Response::Feedback(f) if f.starts_with("OPT:") => {
+                let parts: Vec<&str> = f[4..].split(',').collect();
+                info.line_numbers = parts.first().is_some_and(|o| o.contains('N'));
+                if let Some(rx) = parts.get(2).and_then(|r| r.parse().ok()) {
+                    info.rx_bytes = rx;
+                }
+                probe.got_opt = true;
+            }
+            Response::Ok if probe.got_ver && probe.got_opt => return Ok(true),
+            Response::Status(st) => {
+                probe.first_status_at.get_or_insert_with(Instant::now);
+                info.status = Some(st);
+            }
+            _ => {}
+        }
+        Ok(false)
+    }
+
+    /// After `$I`'s own ok every earlier probe byte has been answered (answers come in order): one fresh
+    /// status report completes the handshake.
+    fn first_status(&mut self, deadline: Instant, mut info: Info) -> Result<Info, StreamError> {
+        self.write(b"?").map_err(|f| self.link_err("handshake", f))?;
+        loop {
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(self.not_grbl());
+            }
+            if let Some(l) = self
+                .read_line(deadline - now)
+                .map_err(|f| self.link_err("handshake", f))?
+            {
+                if let Response::Status(st) = parse_response(&l) {
+                    self.on_status(st.clone());
+                    info.status = Some(st);
+                    return Ok(info);
+                }
+            }
+        }
+    }
+
+    /// The controller must be idle to start; in alarm it is unlocked only when allowed.
+    pub(super) fn require_idle(&mut self, info: &Info, may_unlock: bool) -> Result<(), StreamError> {
+        let state = info.status.as_ref().and_then(|s| s.state);
+        match state {
+            Some(MachineState::Idle) => Ok(()),
+            Some(MachineState::Alarm) if may_unlock => {
+                self.observer.note("controller in alarm: unlocking ($X)");
+                self.command_alone("$X")
+            }
+            Some(MachineState::Alarm) => Err(StreamError::InAlarm {
+                port: self.port(),
+                detail: if info.critical {
+                    " (it needed a reset)".into()
+                } else {
+                    String::new()
+                },
+            }),
+            Some(MachineState::Run | MachineState::Hold { .. } | MachineState::Jog) => {
+                let st = self.settled_status()?;
+                if st.state == Some(MachineState::Idle) {
+                    Ok(())
+                } else {
+                    Err(StreamError::Timeout {
+                        port: self.port(),
+                        what: format!(
+                            "controller is {} and must be Idle to start",
+                            st.state.map_or("unknown".into(), |s| s.to_string())
+                        ),
+                    })
+                }
+            }
+            other => Err(StreamError::Timeout {
+                port: self.port(),
+                what: format!(
+                    "controller is {} and must be Idle to start",
+                    other.map_or("in an unknown state".into(), |s| s.to_string())
+                ),
+            }),
+        }
+    }
+
+    /// Send one line alone and wait for its `ok` (handshake-time commands).
+    pub(super) fn command_alone(&mut self, cmd: &str) -> Result<(), StreamError> {
+        self.write(format!("{cmd}\n").as_bytes())
+            .map_err(|f| self.link_err(cmd, f))?;
+        let deadline = Instant::now() + self.cfg.handshake_timeout;
+        while Instant::now() < deadline {
+            let line = self
+                .read_line(Duration::from_millis(100))
+                .map_err(|f| self.link_err(cmd, f))?;
+            if let Some(l) = line {
+                match parse_response(&l) {
+                    Response::Ok => return Ok(()),
+                    Response::Error(c) => {
+                        return Err(StreamError::Timeout {
+                            port: self.port(),
+                            what: format!("`{cmd}` answered error:{c} ({})", error_text(c)),
+                        })
+                    }
+                    Response::Status(st) => self.on_status(st),
+                    _ => {}
+                }
+            }
+        }
+        Err(StreamError::Timeout {
+            port: self.port(),
+            what: format!("no answer to `{cmd}`"),
+        })
+    }
+
+    /// Poll until the controller is neither running nor holding (bounded by `settle_timeout`).
+    pub(super) fn settled_status(&mut self) -> Result<Status, StreamError> {
+        let deadline = Instant::now() + self.cfg.settle_timeout;
+        loop {
+            let seq = self.status_seq;
+            self.write(b"?").map_err(|f| self.link_err("status", f))?;
+            let asked = Instant::now();
+            while self.status_seq == seq && asked.elapsed() < Duration::from_secs(2) {
+                if let Some(l) = self
+                    .read_line(Duration::from_millis(50))
+                    .map_err(|f| self.link_err("status", f))?
+                {
+                    if let Response::Status(st) = parse_response(&l) {
+                        self.on_status(st);
+                    }
+                }
+            }
+            if let Some(st) = self.status.clone() {
+                let busy = matches!(
+                    st.state,
+                    Some(MachineState::Run | MachineState::Jog | MachineState::Home)
+                ) || matches!(st.state, Some(MachineState::Hold { sub: 1 }))
+                    || (st.state == Some(MachineState::Idle) && st.line.is_some());
+                if !busy && self.status_seq != seq {
+                    return Ok(st);
+                }
+            }
+            if Instant::now() >= deadline {
+                return Err(StreamError::Timeout {
+                    port: self.port(),
+                    what: format!("controller still busy after {:?}", self.cfg.settle_timeout),
+                });
+            }
+            std::thread::sleep(self.cfg.status_interval.max(Duration::from_millis(200)));
+        }
+    }
+
+    /// Wait for the banner that follows a reset.
+    pub(super) fn wait_banner(&mut self) -> Result<(), StreamError> {
+        let deadline = Instant::now() + self.cfg.handshake_timeout;
+        while Instant::now() < deadline {
+            if let Some(l) = self
+                .read_line(Duration::from_millis(100))
+                .map_err(|f| self.link_err("reset", f))?
+            {
+                if matches!(parse_response(&l), Response::Banner(_)) {
+                    return Ok(());
+                }
+            }
+        }
+        Err(StreamError::Timeout {
+            port: self.port(),
+            what: "no banner after reset".into(),
+        })
+    }
+
+    /// Soft reset (Ctrl-X) and wait for the banner.
+    pub(super) fn reset_and_wait_banner(&mut self) -> Result<(), StreamError> {
+        self.write(&[Realtime::SoftReset.byte()])
+            .map_err(|f| self.link_err("reset", f))?;
+        self.wait_banner()
+    }
+}

@@ -1,0 +1,256 @@
+//! The streamer: handshake, optional `$C` check run, character-counted streaming with the journal, and a
+//! safe stop on any fault — feed hold, wait until motion has stopped, read where it stopped, soft reset
+//! (which flushes GRBL's buffers so nothing more runs), then work out exactly which lines executed.
+//!
+//! **What "executed" means.** An `ok` only means *planned*. A line is known executed when a status report
+//! shows a later line executing (`Ln`), when the controller is idle with an empty planner, or — at a stop —
+//! when the stop position places it before the point where motion stopped. The line executing at the stop
+//! is recorded as *partial* with the stop point; a resume finishes it from there.
+//!
+//! [`run`] is the entry point. One `Session` value holds the state of a run; its steps live in one file
+//! per concept, so that each can be read without the others:
+//! - `config`, `outcome`, `error`: the public types ([`Config`], [`Outcome`], [`StreamError`]…);
+//! - `wire`: lines in and bytes out over the [`Link`], and the status poll;
+//! - `handshake`: identifying the controller, waiting for it to be idle, commands sent alone;
+//! - `check`: the `$C` check run;
+//! - `send`: character-counted streaming and the answers that come back;
+//! - `tracking`: which lines executed, from status reports and answers, the journal and progress;
+//! - `stop`: the safe stop after a fault;
+//! - `locate`: which lines ran, from the position where motion stopped ([`locate`]);
+//! - `resume`: checking a journal for resume, and building what a resume sends.
+
+mod check;
+mod config;
+mod error;
+mod handshake;
+mod locate;
+mod outcome;
+mod resume;
+mod send;
+mod stop;
+mod tracking;
+mod wire;
+
+use std::collections::{BTreeSet, VecDeque};
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::time::Instant;
+
+pub use config::{Config, Mode};
+pub use error::StreamError;
+pub use locate::{locate, Located};
+pub use outcome::{Observer, Outcome, Progress, Silent, Stats, StopReason, StopReport};
+
+use super::journal::{Journal, JournalError, Record, VERSION};
+use super::program::{Line, LineKind, Program};
+use super::protocol::{Counter, Status, RX_BUFFER_BYTES};
+use super::serial::Link;
+use handshake::Info;
+
+/// Something that ends streaming.
+#[derive(Debug)]
+enum Fault {
+    Error { line: Option<usize>, code: u16 },
+    Alarm(u16),
+    User,
+    Disconnect(String),
+    Protocol(String),
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Tag {
+    Line(usize),
+    Synthetic,
+}
+
+#[derive(Debug, Clone)]
+struct Outgoing {
+    text: String,
+    tag: Tag,
+    alone: bool,
+}
+
+impl Outgoing {
+    /// A program line as sent (`N`-numbered when `numbered`); `$` lines go alone.
+    fn program_line(l: &Line, numbered: bool) -> Outgoing {
+        Outgoing {
+            text: l.wire_text(numbered),
+            tag: Tag::Line(l.number),
+            alone: l.kind != LineKind::Gcode,
+        }
+    }
+
+    /// A line the streamer adds (a resume's preamble and approach).
+    fn synthetic(text: String) -> Outgoing {
+        Outgoing {
+            text,
+            tag: Tag::Synthetic,
+            alone: false,
+        }
+    }
+}
+
+struct Session<'a> {
+    link: &'a mut dyn Link,
+    program: &'a Program,
+    cfg: &'a Config,
+    observer: &'a mut dyn Observer,
+    stop: &'a AtomicBool,
+    journal: Option<Journal>,
+    rbuf: Vec<u8>,
+    saw: String,
+    counter: Counter<Tag>,
+    line_numbers: bool,
+    next_poll: Instant,
+    last_rx: Instant,
+    status: Option<Status>,
+    status_seq: u64,
+    wco: [f64; 3],
+    /// Acked-ok program lines not yet known executed, in order.
+    planned: VecDeque<usize>,
+    sent: BTreeSet<usize>,
+    errors: BTreeSet<usize>,
+    executed: BTreeSet<usize>,
+    started: Instant,
+    total: usize,
+    stats: Stats,
+    first_send: Option<Instant>,
+    last_ack: Option<Instant>,
+    ack_seq: u64,
+    status_after_ack: bool,
+}
+
+/// Stream `program` over `link`, journaling to `journal_path`. `stop` is raised by Ctrl-C: the run then
+/// holds, stops safely and returns [`Outcome::Stopped`].
+pub fn run(
+    link: &mut dyn Link,
+    program: &Program,
+    cfg: &Config,
+    journal_path: &Path,
+    mode: Mode,
+    observer: &mut dyn Observer,
+    stop: &AtomicBool,
+) -> Result<Outcome, StreamError> {
+    let resume_state = match mode {
+        Mode::Resume => Some(resume::load_state(program, cfg, journal_path)?),
+        Mode::Fresh => {
+            if journal_path.exists() {
+                return Err(JournalError::Exists {
+                    path: journal_path.to_path_buf(),
+                }
+                .into());
+            }
+            None
+        }
+    };
+    let mut s = Session::new(link, program, cfg, observer, stop);
+    let info = s.handshake()?;
+    s.counter = Counter::new(info.rx_bytes);
+    s.line_numbers = info.line_numbers && cfg.number_lines;
+    match resume_state {
+        None => s.run_fresh(&info, journal_path),
+        Some(st) => s.run_resume(&info, journal_path, st),
+    }
+}
+
+impl<'a> Session<'a> {
+    fn new(
+        link: &'a mut dyn Link,
+        program: &'a Program,
+        cfg: &'a Config,
+        observer: &'a mut dyn Observer,
+        stop: &'a AtomicBool,
+    ) -> Session<'a> {
+        let now = Instant::now();
+        Session {
+            link,
+            program,
+            cfg,
+            observer,
+            stop,
+            journal: None,
+            rbuf: Vec::new(),
+            saw: String::new(),
+            counter: Counter::new(RX_BUFFER_BYTES),
+            line_numbers: false,
+            next_poll: now,
+            last_rx: now,
+            status: None,
+            status_seq: 0,
+            wco: [0.0; 3],
+            planned: VecDeque::new(),
+            sent: BTreeSet::new(),
+            errors: BTreeSet::new(),
+            executed: BTreeSet::new(),
+            started: now,
+            total: program.sendable().count(),
+            stats: Stats::default(),
+            first_send: None,
+            last_ack: None,
+            ack_seq: 0,
+            status_after_ack: false,
+        }
+    }
+}
+
+impl Session<'_> {
+    /// A new job: the controller must be idle; check mode first if asked; then the whole program.
+    fn run_fresh(&mut self, info: &Info, journal_path: &Path) -> Result<Outcome, StreamError> {
+        self.require_idle(info, false)?;
+        if self.cfg.check_first {
+            self.check_run()?;
+        }
+        let mut j = Journal::create(journal_path)?;
+        j.record_synced(&start_record(self.program, self.cfg, 1))?;
+        self.journal = Some(j);
+        let queue = self
+            .program
+            .sendable()
+            .map(|l| Outgoing::program_line(l, self.cfg.number_lines))
+            .collect();
+        self.stream(queue)
+    }
+}
+
+fn start_record(program: &Program, cfg: &Config, from_line: usize) -> Record {
+    Record::Start {
+        version: VERSION,
+        program: program.path.display().to_string(),
+        fingerprint: program.fingerprint,
+        lines: program.lines.len(),
+        numbered: cfg.number_lines,
+        from_line,
+    }
+}
+
+fn record_located(j: &mut Journal, loc: &Located) -> Result<(), JournalError> {
+    for (a, b) in ranges(&loc.executed) {
+        j.record(&Record::Executed { from: a, to: b })?;
+    }
+    if let Some((line, at_mm)) = loc.partial {
+        j.record(&Record::Partial { line, at_mm })?;
+    }
+    j.sync()
+}
+
+/// Consecutive runs of increasing line numbers.
+fn ranges(v: &[usize]) -> Vec<(usize, usize)> {
+    let mut out: Vec<(usize, usize)> = Vec::new();
+    for &n in v {
+        match out.last_mut() {
+            Some((_, b)) if *b + 1 == n => *b = n,
+            _ => out.push((n, n)),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ranges_group_consecutive_lines() {
+        assert_eq!(ranges(&[1, 2, 3, 5, 7, 8]), vec![(1, 3), (5, 5), (7, 8)]);
+    }
+}

@@ -1,0 +1,237 @@
+//! The safe stop after a fault: feed hold (unless an alarm already stopped motion), wait for a stopped
+//! state, soft reset so nothing buffered runs, read where motion stopped, work out which planned lines ran
+//! (`locate`), and journal the stop. A disconnect skips the controller part: what ran is found on resume,
+//! from the position the controller then reports.
+
+use std::time::{Duration, Instant};
+
+use super::{locate, record_located, Fault, Located, Outcome, Session, StopReason, StopReport, StreamError, Tag};
+use crate::stream::journal::Record;
+use crate::stream::protocol::{alarm_text, error_text, parse_response, MachineState, Realtime, Response, Status};
+
+impl Session<'_> {
+    /// Stop safely after `fault` and find out exactly what ran.
+    pub(super) fn safe_stop(&mut self, fault: Fault) -> Result<Outcome, StreamError> {
+        let (reason, mut line, mut message) = self.describe(&fault);
+        let mut located = false;
+        let mut retained = false;
+        if !matches!(fault, Fault::Disconnect(_)) {
+            match self.hold_and_reset(&fault) {
+                Ok((stopped, after)) => {
+                    retained = match &fault {
+                        Fault::Alarm(c) => *c == 2,
+                        _ => matches!(stopped.state, Some(MachineState::Hold { sub: 0 } | MachineState::Idle)),
+                    };
+                    located = self.locate_stop(&stopped, after.as_ref(), &mut line, &mut message)?;
+                }
+                Err(e) => message += &format!("; stopping: {e}"),
+            }
+        }
+        if let Some(j) = self.journal.as_mut() {
+            j.record_synced(&Record::Stop {
+                reason: match reason {
+                    StopReason::Error(_) => "error",
+                    StopReason::Alarm(_) => "alarm",
+                    StopReason::User => "user",
+                    StopReason::Disconnect => "disconnect",
+                    StopReason::Protocol => "protocol",
+                }
+                .into(),
+                line,
+                message: message.clone(),
+                located,
+                position_retained: retained,
+            })?;
+        }
+        let resume_line = self
+            .program
+            .sendable()
+            .map(|l| l.number)
+            .find(|n| !self.executed.contains(n));
+        Ok(Outcome::Stopped(
+            StopReport {
+                reason,
+                line,
+                message,
+                located,
+                lines_done: self.executed.len(),
+                resume_line,
+            },
+            self.stats.clone(),
+        ))
+    }
+
+    /// Why the run stops, the line concerned and the message for the user.
+    fn describe(&self, fault: &Fault) -> (StopReason, Option<usize>, String) {
+        match fault {
+            Fault::Error { line, code } => (
+                StopReason::Error(*code),
+                *line,
+                format!(
+                    "error:{code} ({}){}",
+                    error_text(*code),
+                    line.and_then(|n| self.program.line(n)).map_or(
+                        " in a resume approach line".to_string(),
+                        |l| format!(" in `{}`", l.source.trim())
+                    )
+                ),
+            ),
+            Fault::Alarm(code) => (
+                StopReason::Alarm(*code),
+                self.counter.pending().find_map(|t| match t {
+                    Tag::Line(n) => Some(*n),
+                    Tag::Synthetic => None,
+                }),
+                format!("ALARM:{code} ({})", alarm_text(*code)),
+            ),
+            Fault::User => (StopReason::User, None, "stopped by the user (Ctrl-C)".to_string()),
+            Fault::Disconnect(m) => (StopReason::Disconnect, None, format!("link lost: {m}")),
+            Fault::Protocol(m) => (StopReason::Protocol, None, m.clone()),
+        }
+    }
+
+    /// From the stopped status (`Ln`) and the position after the reset, decide which planned lines ran and
+    /// journal it. Returns whether that is known; if not, says why in `message`. Names the line concerned
+    /// in `line` when the fault did not.
+    fn locate_stop(
+        &mut self,
+        stopped: &Status,
+        after: Option<&Status>,
+        line: &mut Option<usize>,
+        message: &mut String,
+    ) -> Result<bool, StreamError> {
+        let ln = stopped.line;
+        let p = self.work_position(after.unwrap_or(stopped));
+        // Only planned lines (answered `ok`) can have run: the rest were flushed by the reset
+        // or, at an alarm, never parsed.
+        let candidates: Vec<usize> = self.planned.iter().copied().collect();
+        let Some(p) = p else {
+            *message += "; the controller reported no position";
+            return Ok(false);
+        };
+        let loc: Located = match locate(self.program, &candidates, ln, p, self.cfg.position_tolerance_mm) {
+            Ok(loc) => loc,
+            Err(e) => {
+                *message += &format!("; cannot tell which lines ran: {e}");
+                return Ok(false);
+            }
+        };
+        if line.is_none() {
+            *line = loc.partial.map(|x| x.0).or_else(|| loc.executed.last().copied());
+        }
+        self.planned.clear();
+        for n in &loc.executed {
+            self.executed.insert(*n);
+        }
+        if let Some(j) = self.journal.as_mut() {
+            record_located(j, &loc)?;
+        }
+        Ok(true)
+    }
+
+    /// Feed hold (unless an alarm already stopped motion), wait for a stopped state, then soft reset
+    /// so nothing buffered runs. Returns the status seen stopped (before the reset) and one after.
+    fn hold_and_reset(&mut self, fault: &Fault) -> Result<(Status, Option<Status>), String> {
+        let alarm = matches!(fault, Fault::Alarm(_));
+        if !alarm {
+            self.write(&[Realtime::FeedHold.byte()]).map_err(|e| format!("{e:?}"))?;
+        }
+        let stopped = self.wait_stopped()?;
+        self.reset_flushing()?;
+        self.counter.flush();
+        let after = self.status_after_reset()?;
+        Ok((stopped, after))
+    }
+
+    /// Poll until a report (newer than the fault) shows motion stopped: `Hold:0`, `Idle` or `Alarm`.
+    fn wait_stopped(&mut self) -> Result<Status, String> {
+        let seq0 = self.status_seq;
+        self.next_poll = Instant::now();
+        let deadline = Instant::now() + self.cfg.hold_timeout;
+        while Instant::now() < deadline {
+            self.maybe_poll().map_err(|e| format!("{e:?}"))?;
+            let wait = self
+                .next_poll
+                .saturating_duration_since(Instant::now())
+                .min(Duration::from_millis(50));
+            if let Some(l) = self.read_line(wait).map_err(|e| format!("{e:?}"))? {
+                match parse_response(&l) {
+                    Response::Ok => self.late_answer(None),
+                    Response::Error(code) => self.late_answer(Some(code)),
+                    Response::Status(st) => {
+                        let s = st.state;
+                        self.on_status(st.clone());
+                        if self.status_seq > seq0
+                            && matches!(
+                                s,
+                                Some(MachineState::Hold { sub: 0 } | MachineState::Idle | MachineState::Alarm)
+                            )
+                        {
+                            return Ok(st);
+                        }
+                    }
+                    _ => {}
+                }
+            }
+        }
+        Err(format!("motion did not stop within {:?}", self.cfg.hold_timeout))
+    }
+
+    /// Flush GRBL's receive buffer and planner with a soft reset — nothing more may run — and wait for
+    /// the banner, crediting answers that arrive meanwhile.
+    fn reset_flushing(&mut self) -> Result<(), String> {
+        self.write(&[Realtime::SoftReset.byte()])
+            .map_err(|e| format!("{e:?}"))?;
+        let deadline = Instant::now() + self.cfg.handshake_timeout;
+        while Instant::now() < deadline {
+            if let Some(l) = self
+                .read_line(Duration::from_millis(50))
+                .map_err(|e| format!("{e:?}"))?
+            {
+                match parse_response(&l) {
+                    Response::Ok => self.late_answer(None),
+                    Response::Error(code) => self.late_answer(Some(code)),
+                    Response::Banner(_) => return Ok(()),
+                    Response::Status(st) => self.on_status(st),
+                    _ => {}
+                }
+            }
+        }
+        Err("no banner after the soft reset".into())
+    }
+
+    /// One fresh report after the reset: the position where everything stopped.
+    fn status_after_reset(&mut self) -> Result<Option<Status>, String> {
+        let seq = self.status_seq;
+        let _ = self.write(&[Realtime::Status.byte()]);
+        let deadline = Instant::now() + Duration::from_secs(2);
+        while self.status_seq == seq && Instant::now() < deadline {
+            if let Some(l) = self
+                .read_line(Duration::from_millis(50))
+                .map_err(|e| format!("{e:?}"))?
+            {
+                if let Response::Status(st) = parse_response(&l) {
+                    self.on_status(st);
+                }
+            }
+        }
+        Ok((self.status_seq != seq).then(|| self.status.clone()).flatten())
+    }
+
+    /// An `ok` (`code` = None) or `error:code` that arrives while stopping: credit it to the oldest line in
+    /// flight and journal it best-effort (the stop itself must not fail on the journal).
+    fn late_answer(&mut self, code: Option<u16>) {
+        if let Some(Tag::Line(n)) = self.counter.answered() {
+            match code {
+                None => {
+                    let _ = self.journal(&Record::Ok { line: n });
+                    self.planned.push_back(n);
+                }
+                Some(code) => {
+                    let _ = self.journal(&Record::Error { line: n, code });
+                    self.errors.insert(n);
+                }
+            }
+        }
+    }
+}

@@ -1,0 +1,108 @@
+//! Which lines executed, as the streamer learns it while streaming: status reports (`Ln`, an idle
+//! controller with an empty planner) move `ok`-ed lines from *planned* to *executed*, each change is
+//! journaled, and progress is reported. Also the work position (a report's `WPos`, or `MPos` − the last
+//! `WCO`) and the journal writes shared by the other steps.
+
+use std::time::Duration;
+
+use super::{ranges, Fault, Progress, Session};
+use crate::stream::journal::Record;
+use crate::stream::protocol::{MachineState, Status, PLANNER_BLOCKS};
+
+impl Session<'_> {
+    /// The work position of a report: `WPos`, or `MPos` less the last `WCO`.
+    pub(super) fn work_position(&self, st: &Status) -> Option<[f64; 3]> {
+        if let Some(w) = st.wpos {
+            return Some(w);
+        }
+        st.mpos
+            .map(|m| [m[0] - self.wco[0], m[1] - self.wco[1], m[2] - self.wco[2]])
+    }
+
+    /// A status report: lines planned before the executing one (`Ln`), or all of them when the controller
+    /// is idle with an empty planner, have executed.
+    pub(super) fn on_status(&mut self, st: Status) {
+        if let Some(w) = st.wco {
+            self.wco = w;
+        }
+        self.status_seq += 1;
+        self.status_after_ack = true;
+        let mut newly = Vec::new();
+        if let Some(ln) = st.line {
+            // Block `ln` is executing: every line planned before it has run.
+            while let Some(&n) = self.planned.front() {
+                if n >= ln as usize {
+                    break;
+                }
+                newly.push(n);
+                self.planned.pop_front();
+            }
+        } else if st.state == Some(MachineState::Idle) && self.planner_known_empty(&st) {
+            newly.extend(self.planned.drain(..));
+        }
+        self.mark_executed(&newly);
+        self.status = Some(st);
+        self.report_progress();
+    }
+
+    /// Idle with nothing in the planner: without `Ln` (when line numbers are reported) or with `Bf` full.
+    fn planner_known_empty(&self, st: &Status) -> bool {
+        (self.line_numbers && st.line.is_none()) || st.planner_free == Some(PLANNER_BLOCKS)
+    }
+
+    /// Record `lines` as executed, in the journal too.
+    fn mark_executed(&mut self, lines: &[usize]) {
+        if lines.is_empty() {
+            return;
+        }
+        for &n in lines {
+            self.executed.insert(n);
+        }
+        if let Some(j) = self.journal.as_mut() {
+            for (a, b) in ranges(lines) {
+                // A journal write failure must not go unnoticed: it is reported at the next stop.
+                if let Err(e) = j.record(&Record::Executed { from: a, to: b }) {
+                    self.observer.note(&format!("journal: {e}"));
+                }
+            }
+        }
+    }
+
+    /// Tell the observer where the job stands, with an ETA from the rate so far.
+    fn report_progress(&mut self) {
+        let done = self.executed.len();
+        let elapsed = self.started.elapsed().as_secs_f64();
+        let rate = done as f64 / elapsed.max(1e-3);
+        let eta =
+            (rate > 0.0 && done > 0).then(|| Duration::from_secs_f64(self.total.saturating_sub(done) as f64 / rate));
+        let p = Progress {
+            lines_total: self.total,
+            lines_done: done,
+            lines_acked: self.stats.lines_sent.saturating_sub(self.counter.outstanding()),
+            state: self.status.as_ref().and_then(|s| s.state),
+            position_mm: self.status.as_ref().and_then(|s| self.work_position(s)),
+            eta,
+        };
+        self.observer.progress(&p);
+    }
+
+    /// Journal a record while streaming (a write failure stops the job).
+    pub(super) fn journal(&mut self, r: &Record) -> Result<(), Fault> {
+        match self.journal.as_mut() {
+            Some(j) => j
+                .record(r)
+                .map_err(|e| Fault::Protocol(format!("journal write failed: {e}"))),
+            None => Ok(()),
+        }
+    }
+
+    /// The last report shows a machine at rest with nothing executing.
+    pub(super) fn idle(&self) -> bool {
+        self.status.as_ref().is_some_and(|s| {
+            matches!(
+                s.state,
+                Some(MachineState::Idle | MachineState::Alarm | MachineState::Check)
+            ) && s.line.is_none()
+        })
+    }
+}
