@@ -320,10 +320,13 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
         ndf_outside: outside,
         wave: wcfg.clone(),
         wave_albedo: slice.albedo(),
-        wave_vs_geometric_l1: [wave::relative_l1(&wx, &gx), wave::relative_l1(&wy, &gy)],
+        wave_vs_geometric_l1: [
+            crate::distance::relative_l1(&wx, &gx),
+            crate::distance::relative_l1(&wy, &gy),
+        ],
         wave_vs_geometric_variance_ratio: [
-            wave::variance(&p, &wx) / wave::variance(&p, &gx),
-            wave::variance(&p, &wy) / wave::variance(&p, &gy),
+            crate::distance::weighted_variance(&p, &wx) / crate::distance::weighted_variance(&p, &gx),
+            crate::distance::weighted_variance(&p, &wy) / crate::distance::weighted_variance(&p, &gy),
         ],
         fft_vs_gabor_l2: l2,
         notes,

@@ -25,6 +25,7 @@
 
 pub mod analyze;
 pub mod brdf;
+pub mod distance;
 pub mod facets;
 pub(crate) mod fft2;
 pub mod gcode;

@@ -259,13 +259,7 @@ impl SlopeGrid {
     /// Relative L1 distance `∑|a − b| / ∑|b|` to a density on the same domain.
     pub fn relative_l1(&self, reference: &SlopeGrid) -> f64 {
         assert_eq!(self.domain, reference.domain, "relative_l1 needs equal domains");
-        let num: f64 = self
-            .density
-            .iter()
-            .zip(&reference.density)
-            .map(|(a, b)| (a - b).abs())
-            .sum();
-        num / reference.density.iter().map(|b| b.abs()).sum::<f64>()
+        crate::distance::relative_l1(&self.density, &reference.density)
     }
 
     /// Smith's `Λ(w)` of this density, by quadrature over the grid:

@@ -647,20 +647,6 @@ pub fn geometric_marginals(slopes: &[(f64, f64)], p: &[f64], slice: &WaveSlice, 
     (hist(&|s| s.0), hist(&|s| s.1))
 }
 
-/// Relative L1 distance `Σ|a − b| / Σ|b|`.
-pub fn relative_l1(a: &[f64], b: &[f64]) -> f64 {
-    let num: f64 = a.iter().zip(b).map(|(x, y)| (x - y).abs()).sum();
-    let den: f64 = b.iter().map(|y| y.abs()).sum();
-    num / den.max(f64::MIN_POSITIVE)
-}
-
-/// Variance of a density on a grid.
-pub fn variance(x: &[f64], d: &[f64]) -> f64 {
-    let t: f64 = d.iter().sum();
-    let mean: f64 = x.iter().zip(d).map(|(x, d)| x * d).sum::<f64>() / t;
-    x.iter().zip(d).map(|(x, d)| (x - mean).powi(2) * d).sum::<f64>() / t
-}
-
 /// A warning when a raster finish's scallops (period = stepover `d`) diffract into visible orders inside
 /// the reflection lobe, with the stepovers that avoid it; `None` when they do not.
 ///
