@@ -89,8 +89,8 @@ pub fn run(a: &Args) -> Result<()> {
     let text = std::fs::read_to_string(&a.program).with_context(|| format!("cannot read {}", a.program.display()))?;
     let design = match &a.design {
         Some(p) => {
-            let t = TileFile::read(p).map_err(|e| anyhow!(e))?;
-            Some(t.load_heightfield(p).map_err(|e| anyhow!(e))?)
+            let t = TileFile::read(p)?;
+            Some(t.load_heightfield(p)?)
         }
         None => None,
     };

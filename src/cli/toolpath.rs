@@ -1,6 +1,6 @@
 //! `brdfmill toolpath`: tile.json + machine profile → program.nc.
 
-use anyhow::{anyhow, bail, Result};
+use anyhow::{bail, Result};
 use brdfmill::facets::TileFile;
 use brdfmill::toolpath::{self, machine::Machine, machine::Stock, Strategy, ToolpathConfig};
 use std::path::PathBuf;
@@ -81,8 +81,8 @@ pub fn config(a: &Args) -> Result<ToolpathConfig> {
 pub fn run(a: &Args) -> Result<()> {
     let cfg = config(a)?;
     let machine = Machine::load(&a.machine)?;
-    let tile = TileFile::read(&a.tile).map_err(|e| anyhow!(e))?;
-    let hf = tile.load_heightfield(&a.tile).map_err(|e| anyhow!(e))?;
+    let tile = TileFile::read(&a.tile)?;
+    let hf = tile.load_heightfield(&a.tile)?;
     let t0 = std::time::Instant::now();
     let p = toolpath::run(&cfg, &hf, &machine)?;
     brdfmill::io::write_atomic(&a.out, p.gcode.as_bytes())?;

@@ -129,6 +129,25 @@ pub struct TileFile {
     pub stats: TileStats,
 }
 
+/// A `tile.json` (or the heightfield it names) that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum TileFileError {
+    /// The file could not be read.
+    #[error(transparent)]
+    Read(#[from] crate::io::ReadError),
+    /// The heightfield file is not a 2D float64 array.
+    #[error(transparent)]
+    Npy(#[from] crate::npy::NpyError),
+    /// The content is wrong.
+    #[error("{path}: {reason}")]
+    Invalid {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, naming the key.
+        reason: String,
+    },
+}
+
 impl TileFile {
     /// Describe a tile whose heights are written to `npy_name` beside the JSON.
     pub fn new(tile: &Tile, source: Source, npy_name: &str) -> Self {
@@ -192,29 +211,33 @@ impl TileFile {
     }
 
     /// Read and validate `tile.json`.
-    pub fn read(path: &Path) -> Result<Self, String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
-        let f: TileFile =
-            serde_json::from_str(&text).map_err(|e| format!("{}: not a valid tile.json: {e}", path.display()))?;
+    pub fn read(path: &Path) -> Result<Self, TileFileError> {
+        let text = crate::io::read_to_string(path)?;
+        let invalid = |reason: String| TileFileError::Invalid {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let f: TileFile = serde_json::from_str(&text).map_err(|e| invalid(format!("not a valid tile.json: {e}")))?;
         if f.format != FORMAT || f.version != VERSION {
-            return Err(format!(
-                "{}: format {} version {}, expected {FORMAT} version {VERSION}",
-                path.display(),
-                f.format,
-                f.version
-            ));
+            return Err(invalid(format!(
+                "format {} version {}, expected {FORMAT} version {VERSION}",
+                f.format, f.version
+            )));
         }
-        let n = f.facets.w * f.facets.h;
+        let n = f
+            .facets
+            .w
+            .checked_mul(f.facets.h)
+            .ok_or_else(|| invalid(format!("\"facets\" is {}×{}: too many", f.facets.w, f.facets.h)))?;
         for (key, len) in [
             ("p", f.facets.p.len()),
             ("q", f.facets.q.len()),
             ("z_mm", f.facets.z_mm.len()),
         ] {
             if len != n {
-                return Err(format!(
-                    "{}: \"facets.{key}\" has {len} values, expected w·h = {n}",
-                    path.display()
-                ));
+                return Err(invalid(format!(
+                    "\"facets.{key}\" has {len} values, expected w·h = {n}"
+                )));
             }
         }
         Ok(f)
@@ -229,16 +252,18 @@ impl TileFile {
     }
 
     /// Load the heightfield the tile describes, checking it matches the description.
-    pub fn load_heightfield(&self, json_path: &Path) -> Result<Heightfield, String> {
+    pub fn load_heightfield(&self, json_path: &Path) -> Result<Heightfield, TileFileError> {
         let p = self.npy_path(json_path);
-        let (rows, cols, z) = crate::npy::read_f64_2d(&p).map_err(|e| e.to_string())?;
+        let (rows, cols, z) = crate::npy::read_f64_2d(&p)?;
+        let invalid = |reason: String| TileFileError::Invalid {
+            path: p.clone(),
+            reason,
+        };
         if rows != self.heightfield.ny || cols != self.heightfield.nx {
-            return Err(format!(
-                "{}: shape ({rows}, {cols}) but tile.json says ({}, {})",
-                p.display(),
-                self.heightfield.ny,
-                self.heightfield.nx
-            ));
+            return Err(invalid(format!(
+                "shape ({rows}, {cols}) but tile.json says ({}, {})",
+                self.heightfield.ny, self.heightfield.nx
+            )));
         }
         let hf = Heightfield {
             nx: cols,
@@ -247,7 +272,7 @@ impl TileFile {
             periodic: self.heightfield.periodic,
             z_mm: z,
         };
-        hf.check_invariants().map_err(|e| format!("{}: {e}", p.display()))?;
+        hf.check_invariants().map_err(invalid)?;
         Ok(hf)
     }
 }

@@ -13,7 +13,7 @@ pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) 
         .machine
         .tool(&job.toolpath.tool)
         .map(|t| format!("{} ({} mm ball), stock {:?}", t.id, t.diameter_mm(), job.toolpath.stock))
-        .unwrap_or_else(|e| e);
+        .unwrap_or_else(|e| e.to_string());
     vec![
         ("target BRDF".into(), n.brdf_spec.clone()),
         ("base lobe".into(), n.base_spec.clone().unwrap_or_else(|| "none".into())),

@@ -200,51 +200,101 @@ pub struct Machine {
     pub tools: Vec<Tool>,
 }
 
-/// A machine profile that cannot be used.
+/// What is wrong with a machine profile's text.
 #[derive(Debug, thiserror::Error)]
-#[error("{path}: {reason}")]
-pub struct MachineError {
-    /// The profile file.
-    pub path: String,
-    /// What is wrong, naming the field.
-    pub reason: String,
+pub enum ProfileError {
+    /// Not TOML, or not this format (the message has the line and column).
+    #[error("{0}")]
+    Syntax(String),
+    /// A profile of another format version.
+    #[error("`version` = {found}: this build reads machine profiles of version {VERSION}")]
+    Version {
+        /// The version the profile declares.
+        found: i64,
+    },
+    /// No `version` key.
+    #[error("missing `version` (expected version = {VERSION})")]
+    NoVersion,
+    /// A field out of range.
+    #[error("`{field}` must be {expected}, got {value}")]
+    Field {
+        /// The field, as a TOML path (`tools[1] (ball1).flute_length_mm`).
+        field: String,
+        /// What it must be.
+        expected: String,
+        /// What it is.
+        value: String,
+    },
+    /// Two tools with one id.
+    #[error("tool id `{0}` is used twice")]
+    DuplicateTool(String),
+    /// The tool asked for is not in the profile.
+    #[error("machine `{machine}` has no tool `{id}`; its tools: {tools}")]
+    NoTool {
+        /// The profile's name.
+        machine: String,
+        /// The id asked for.
+        id: String,
+        /// The ids there are.
+        tools: String,
+    },
+}
+
+/// A machine profile that cannot be used: the file and what is wrong with it.
+#[derive(Debug, thiserror::Error)]
+pub enum MachineError {
+    /// The file could not be read.
+    #[error(transparent)]
+    Read(#[from] crate::io::ReadError),
+    /// The file's content is wrong.
+    #[error("{path}: {error}")]
+    Profile {
+        /// The profile file.
+        path: String,
+        /// What is wrong, naming the field.
+        #[source]
+        error: ProfileError,
+    },
+}
+
+fn field(field: impl Into<String>, expected: &str, value: impl std::fmt::Display) -> ProfileError {
+    ProfileError::Field {
+        field: field.into(),
+        expected: expected.into(),
+        value: value.to_string(),
+    }
 }
 
 impl Machine {
     /// Read and validate a profile.
     pub fn load(path: &Path) -> Result<Self, MachineError> {
-        let err = |reason: String| MachineError {
+        let text = crate::io::read_to_string(path)?;
+        Self::parse(&text).map_err(|error| MachineError::Profile {
             path: path.display().to_string(),
-            reason,
-        };
-        let text = std::fs::read_to_string(path).map_err(|e| err(format!("cannot read the machine profile: {e}")))?;
-        Self::parse(&text).map_err(err)
+            error,
+        })
     }
 
     /// Parse and validate profile text.
-    pub fn parse(text: &str) -> Result<Self, String> {
+    pub fn parse(text: &str) -> Result<Self, ProfileError> {
         // Check the version first so an old or new profile gets that message, not a field error.
-        let raw: toml::Value = toml::from_str(text).map_err(|e| e.to_string())?;
+        let raw: toml::Value = toml::from_str(text).map_err(|e| ProfileError::Syntax(e.to_string()))?;
         match raw.get("version").and_then(|v| v.as_integer()) {
             Some(v) if v == VERSION as i64 => {}
-            Some(v) => {
-                return Err(format!(
-                    "`version` = {v}: this build reads machine profiles of version {VERSION}"
-                ))
-            }
-            None => return Err(format!("missing `version` (expected version = {VERSION})")),
+            Some(found) => return Err(ProfileError::Version { found }),
+            None => return Err(ProfileError::NoVersion),
         }
-        let m: Machine = toml::from_str(text).map_err(|e| e.to_string())?;
+        let m: Machine = toml::from_str(text).map_err(|e| ProfileError::Syntax(e.to_string()))?;
         m.validate()?;
         Ok(m)
     }
 
-    fn validate(&self) -> Result<(), String> {
-        let pos = |name: &str, v: f64| -> Result<(), String> {
+    fn validate(&self) -> Result<(), ProfileError> {
+        let pos = |name: &str, v: f64| -> Result<(), ProfileError> {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(format!("`{name}` must be a positive number, got {v}"))
+                Err(field(name, "a positive number", v))
             }
         };
         pos("travel.x_mm", self.travel.x_mm)?;
@@ -260,24 +310,27 @@ impl Machine {
         pos("limits.path_tolerance_mm", l.path_tolerance_mm)?;
         pos("spindle.max_rpm", self.spindle.max_rpm)?;
         if !(self.spindle.min_rpm >= 0.0 && self.spindle.min_rpm <= self.spindle.max_rpm) {
-            return Err(format!(
-                "`spindle.min_rpm` = {} must be in [0, max_rpm]",
-                self.spindle.min_rpm
+            return Err(field(
+                "spindle.min_rpm",
+                "in [0, spindle.max_rpm]",
+                self.spindle.min_rpm,
             ));
         }
         pos("program.safe_z_mm", self.program.safe_z_mm)?;
         if self.program.spindle_dwell_s.is_nan() || self.program.spindle_dwell_s < 0.0 {
-            return Err("`program.spindle_dwell_s` must be ≥ 0".into());
+            return Err(field("program.spindle_dwell_s", "≥ 0", self.program.spindle_dwell_s));
         }
         if self.tools.is_empty() {
-            return Err("no `[[tools]]`: a machine needs at least one tool".into());
+            return Err(field("tools", "at least one `[[tools]]` entry", "none"));
         }
         for (k, t) in self.tools.iter().enumerate() {
-            let f = |field: &str| format!("tools[{k}] (`{}`).{field}", t.id);
+            let f = |name: &str| format!("tools[{k}] (`{}`).{name}", t.id);
             if self.tools[..k].iter().any(|o| o.id == t.id) {
-                return Err(format!("tool id `{}` is used twice", t.id));
+                return Err(ProfileError::DuplicateTool(t.id.clone()));
             }
-            t.shape.validate().map_err(|e| format!("{}: {e}", f("shape")))?;
+            t.shape
+                .validate()
+                .map_err(|e| field(f(&e.field), &e.expected, &e.value))?;
             pos(&f("flute_length_mm"), t.flute_length_mm)?;
             for (name, c) in [("aluminium", &t.aluminium), ("wax", &t.wax)] {
                 pos(&f(&format!("{name}.feed_mm_min")), c.feed_mm_min)?;
@@ -290,14 +343,14 @@ impl Machine {
     }
 
     /// The tool with this id; the error lists the ones there are.
-    pub fn tool(&self, id: &str) -> Result<&Tool, String> {
+    pub fn tool(&self, id: &str) -> Result<&Tool, ProfileError> {
         self.tools.iter().find(|t| t.id == id).ok_or_else(|| {
             let ids: Vec<&str> = self.tools.iter().map(|t| t.id.as_str()).collect();
-            format!(
-                "machine `{}` has no tool `{id}`; its tools: {}",
-                self.name,
-                ids.join(", ")
-            )
+            ProfileError::NoTool {
+                machine: self.name.clone(),
+                id: id.to_string(),
+                tools: ids.join(", "),
+            }
         })
     }
 }
@@ -338,10 +391,19 @@ mod tests {
     fn bad_profiles_name_the_field() {
         let good = std::fs::read_to_string(&shipped()[0]).unwrap();
         let e = Machine::parse(&good.replace("version = 1", "version = 2")).unwrap_err();
-        assert!(e.contains("version"), "{e}");
-        let e = Machine::parse(&good.replace("x_mm =", "x_mmm =")).unwrap_err();
+        assert!(matches!(e, ProfileError::Version { found: 2 }), "{e}");
+        let e = Machine::parse(&good.replace("x_mm =", "x_mmm ="))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("x_mmm"), "{e}");
-        let e = Machine::parse(&good.replacen("diameter_mm = ", "diameter_mm = -", 1)).unwrap_err();
+        let e = Machine::parse(&good.replacen("diameter_mm = ", "diameter_mm = -", 1))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("diameter_mm"), "{e}");
+        let e = Machine::parse(&good.replacen("flute_length_mm = ", "flute_length_mm = -", 1)).unwrap_err();
+        assert!(
+            matches!(&e, ProfileError::Field { field, .. } if field.ends_with(".flute_length_mm")),
+            "{e}"
+        );
     }
 }

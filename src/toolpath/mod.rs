@@ -89,6 +89,9 @@ pub enum ToolpathError {
     /// The program would violate a machine limit.
     #[error("refused: {0}")]
     Machine(String),
+    /// The machine profile does not have what the configuration asks for.
+    #[error("toolpath config: {0}")]
+    Profile(#[from] machine::ProfileError),
 }
 
 /// What the program does, in numbers.
@@ -194,7 +197,7 @@ struct Plan<'a> {
 /// Check the configuration against the machine and the tile; choose the tools and the stepover.
 fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> Result<Plan<'a>, ToolpathError> {
     let bad = |s: String| Err(ToolpathError::Config(s));
-    let tool = machine.tool(&cfg.tool).map_err(ToolpathError::Config)?;
+    let tool = machine.tool(&cfg.tool)?;
     if !matches!(tool.shape, Shape::Ball { .. }) {
         return bad(format!(
             "finishing needs a ball-nose tool; `{}` is {:?}",
@@ -205,7 +208,7 @@ fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> R
     let rough = if cfg.rough_tool.is_empty() {
         tool
     } else {
-        machine.tool(&cfg.rough_tool).map_err(ToolpathError::Config)?
+        machine.tool(&cfg.rough_tool)?
     };
     let [ax, ay] = cfg.area_mm;
     if !(ax > 0.0 && ay > 0.0 && ax.is_finite() && ay.is_finite()) {
