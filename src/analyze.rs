@@ -154,7 +154,10 @@ fn remove_plane(z: &mut [f64], valid: &[bool], nx: usize, pitch_mm: f64) -> [f64
     [b, c]
 }
 
-fn load(path: &Path, cfg: &Config) -> Result<(Heightfield, Vec<bool>, usize), AnalyzeError> {
+/// The surface, its validity mask, the number of missing points and the reader's warnings.
+type Loaded = (Heightfield, Vec<bool>, usize, Vec<String>);
+
+fn load(path: &Path, cfg: &Config) -> Result<Loaded, AnalyzeError> {
     let input = |message: String| AnalyzeError::Input {
         path: path.to_path_buf(),
         message,
@@ -169,7 +172,7 @@ fn load(path: &Path, cfg: &Config) -> Result<(Heightfield, Vec<bool>, usize), An
             let s = crate::x3p::read(path)?;
             let missing = s.invalid_count();
             let hf = s.heightfield().map_err(input)?;
-            Ok((hf, s.valid, missing))
+            Ok((hf, s.valid, missing, s.warnings))
         }
         "npy" => {
             let pitch = cfg
@@ -185,7 +188,7 @@ fn load(path: &Path, cfg: &Config) -> Result<(Heightfield, Vec<bool>, usize), An
             let valid: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
             let missing = valid.iter().filter(|v| !**v).count();
             let x = crate::x3p::X3p::from_grid(nx, ny, pitch * 1e-3, z, valid.clone());
-            Ok((x.heightfield().map_err(input)?, valid, missing))
+            Ok((x.heightfield().map_err(input)?, valid, missing, Vec::new()))
         }
         _ => Err(input("expected a .x3p or .npy file".into())),
     }
@@ -200,13 +203,31 @@ fn png_uri(c: &Canvas) -> String {
 
 /// Run the analysis of `input` and write every artifact into `out`.
 pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeError> {
-    let (mut hf, valid, missing) = load(input, cfg)?;
+    let (mut hf, valid, missing, mut warnings) = load(input, cfg)?;
     let bad = |message: String| AnalyzeError::Input {
         path: input.to_path_buf(),
         message,
     };
-    if hf.nx < 8 || hf.ny < 8 {
-        return Err(bad(format!("too small ({}×{})", hf.nx, hf.ny)));
+    // one central difference needs three points per axis; anything larger analyses
+    if hf.nx < 3 || hf.ny < 3 {
+        return Err(bad(format!(
+            "{}×{} points: a slope needs at least 3×3 points",
+            hf.nx, hf.ny
+        )));
+    }
+    let side_um = (hf.nx.min(hf.ny) as f64) * hf.pitch_mm * 1e3;
+    if side_um < 8.0 * cfg.sigma_um {
+        warnings.push(format!(
+            "the surface is {side_um:.1} µm across, less than the 8σ = {:.0} µm a coherence window needs: the wave optics see it as periodic and resolve only a few directions",
+            8.0 * cfg.sigma_um
+        ));
+    }
+    if hf.pitch_mm * 1e3 > cfg.sigma_um {
+        warnings.push(format!(
+            "the pitch {:.2} µm is larger than the coherence σ = {} µm: one sample per coherence area, so the wave optics see facets, not the surface's detail",
+            hf.pitch_mm * 1e3,
+            cfg.sigma_um
+        ));
     }
     let tilt = remove_plane(&mut hf.z_mm, &valid, hf.nx, hf.pitch_mm);
     let n_valid = valid.iter().filter(|v| **v).count().max(1);
@@ -285,12 +306,13 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
     let slices_png = wave_vs_geometric_png(&slice, &geo, &wi, max_slope);
     let surface_png = hf.relief_png("surface (mean plane removed, missing points filled)", 900);
 
-    let mut notes = vec![format!(
+    let mut notes: Vec<String> = warnings.iter().map(|w| format!("Warning: {w}.")).collect();
+    notes.push(format!(
         "Mean plane removed: slopes {:.5}, {:.5} ({:.3}°).",
         tilt[0],
         tilt[1],
         tilt[0].hypot(tilt[1]).atan().to_degrees()
-    )];
+    ));
     if missing > 0 {
         notes.push(format!(
             "{missing} missing points: slopes skip every difference touching one; the wave optics see them \

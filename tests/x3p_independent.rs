@@ -13,9 +13,9 @@
 //! and integer data types: Increment is the multiplyer of the integer coordinate for the computation of the
 //! real coordinate" (openGPS iso5436_2.xsd), and the openGPS reference library adds only `Offset` to a Z value
 //! (`ISO5436_2Container::ConvertPointToCoord`): a float Z is metres whatever `CZ/Increment` says. x3pio, on
-//! the other hand, multiplies every type by the increment. brdfmill multiplies too, and its writer stores mm
-//! with `CZ/Increment = 1.0E-3` — a file that openGPS-based readers take as 1000 × too high. The last test,
-//! a hand-written float64 file of metres with `CZ/Increment = 1.0E-6`, is ignored for that reason.
+//! the other hand, multiplies every type by the increment. brdfmill follows the schema and openGPS (with a
+//! warning when a float file's increment is not 1), and its writer stores metres; the last test, a
+//! hand-written float64 file of metres with `CZ/Increment = 1.0E-6`, checks that rule.
 
 use brdfmill::x3p::{self, X3p};
 use std::f64::consts::PI;
@@ -94,9 +94,6 @@ fn x3pio_int32_file_heights_read_as_written() {
 }
 
 #[test]
-#[ignore = "known bug: brdfmill looks for the validity file at Record3/ValidPointsLink; the schema (and \
-            x3pio, openGPS) put it at Record3/DataLink/ValidPointsLink, so missing points of integer data \
-            read as valid heights"]
 fn x3pio_int32_file_missing_points_are_invalid() {
     let s = read("x3pio-i32.x3p");
     check_grid(&s, "x3pio-i32", &MISSING, true);
@@ -154,9 +151,6 @@ fn the_real_scan_reads_as_x3pio_reads_it() {
 }
 
 #[test]
-#[ignore = "known bug: brdfmill applies CZ/Increment to floating-point Z data (here 1e-6), which the \
-            schema documents for integer types only and openGPS does not apply; heights come out 1e-6 × \
-            too small"]
 fn float64_metres_with_a_z_increment_read_as_metres() {
     let s = read("hand-f64-inc1e-6.x3p");
     assert_eq!(s.data_type, 'D');

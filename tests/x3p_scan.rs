@@ -1,5 +1,5 @@
 //! The real confocal scan in `tests/data/x3p/` (copied from `shared/data/x3p/`): it loads with its invalid
-//! points, and a surface written by brdfmill reads back bit-identical.
+//! points, and a surface written by brdfmill reads back within two rounding steps.
 
 use brdfmill::heightfield::Heightfield;
 use std::path::Path;
@@ -32,7 +32,7 @@ fn the_real_scan_loads_with_its_missing_points() {
 }
 
 #[test]
-fn an_x3p_written_by_brdfmill_reads_back_bit_identical() {
+fn an_x3p_written_by_brdfmill_reads_back_within_rounding() {
     let dir = tempfile::tempdir().unwrap();
     // the scan's own (filled) heights through .npy, then X3P
     let hf = scan().heightfield().unwrap();
@@ -52,11 +52,12 @@ fn an_x3p_written_by_brdfmill_reads_back_bit_identical() {
     assert_eq!((back.nx, back.ny), (nx, ny));
     assert_eq!(back.invalid_count(), 0);
     assert_eq!(back.data_checksum_ok, Some(true));
+    // heights are stored in metres (ISO 25178-72's float data): z·10⁻³·10³ is within two rounding steps of z
     assert!(from_npy
         .z_mm
         .iter()
         .zip(&back.z_mm)
-        .all(|(a, b)| a.to_bits() == b.to_bits()));
+        .all(|(a, b)| (a - b).abs() <= 2.0 * f64::EPSILON * a.abs()));
     // and md5checksum.hex is the MD5 of main.xml, as ISO 25178-72 requires
     let f = std::fs::File::open(&x3p).unwrap();
     let mut zip = zip::ZipArchive::new(f).unwrap();

@@ -56,6 +56,9 @@ pub fn run(a: &Args) -> Result<()> {
         r.wave_vs_geometric_variance_ratio[1],
         r.fft_vs_gabor_l2
     );
+    for n in r.notes.iter().filter(|n| n.starts_with("Warning")) {
+        eprintln!("{n}");
+    }
     println!("report: {}", a.out.join("report.html").display());
     Ok(())
 }

@@ -11,10 +11,18 @@
 //! first), inline `DataList` data with empty `Datum` for invalid points, and data types D (f64), F (f32),
 //! L (i32) and I (i16). Axes are in metres in the file; brdfmill's heightfields are in mm.
 //!
-//! Heights: for the Z axis the stored value `v` gives `z = Offset + Increment · v` in metres. The writer
-//! stores heights **in mm** with `CZ/Increment = 1.0E-3` so that a project file reads back bit-identical
-//! (the reader forms the scale `Increment · 1000` first, which is exactly 1 for `1.0E-3`, then multiplies);
-//! storing metres would need a division by 1000 that cannot be inverted exactly for about 1% of doubles.
+//! Heights, as ISO 25178-72 and its reference implementation (openGPS) define them: for integer data (L, I)
+//! the stored value `v` gives `z = Offset + Increment · v` in metres; for floating-point data (D, F) the
+//! value is already a length in metres, `z = Offset + v`, and `Increment` is not applied (the schema: the
+//! increment is "needed for incremental axis and integer data types"). Some writers multiply float data by
+//! the increment too; a float file whose `CZ/Increment` is not 1 is read by the standard's rule with a
+//! warning that says so ([`X3p::warnings`]). The one exception is brdfmill's own files before this rule
+//! (Creator `brdfmill`, `CZ/Increment = 1.0E-3`, a comment that heights are stored in mm), read as written.
+//! The writer stores metres as the standard says.
+//!
+//! Sizes declared in the file are checked against the real data before anything is allocated: an entry
+//! larger than the surface it belongs to, or a surface beyond [`MAX_POINTS`], is refused; a point-data MD5
+//! that does not match is refused as a corrupted file.
 //!
 //! Invalid points: [`X3p::valid`] marks them; [`X3p::heightfield`] fills them by iterated averaging of
 //! their valid neighbours (an inpainting that keeps the surface smooth and continuous, used for wave optics)
@@ -24,6 +32,13 @@ use crate::heightfield::Heightfield;
 use md5::{Digest, Md5};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
+
+/// The most points a surface may have (2²⁶ = 8192², 512 MiB of f64 heights): past it the reader refuses
+/// before allocating, naming the declared size.
+pub const MAX_POINTS: usize = 1 << 26;
+
+/// The largest `main.xml` read, bytes.
+const MAX_XML_BYTES: u64 = 64 << 20;
 
 /// An X3P file could not be read or written.
 #[derive(Debug, thiserror::Error)]
@@ -117,8 +132,11 @@ pub struct X3p {
     pub creator: Option<String>,
     /// `Record2/Instrument` manufacturer and model, when present.
     pub instrument: Option<String>,
-    /// Whether the point data's MD5 matched `MD5ChecksumPointData` (`None`: no checksum given).
+    /// Whether the point data's MD5 matched `MD5ChecksumPointData` (`None`: no checksum given; a mismatch
+    /// is refused when reading).
     pub data_checksum_ok: Option<bool>,
+    /// What the reader noticed but read anyway (an increment on float data, an implausible height range).
+    pub warnings: Vec<String>,
 }
 
 impl X3p {
@@ -137,6 +155,7 @@ impl X3p {
             creator: None,
             instrument: None,
             data_checksum_ok: None,
+            warnings: Vec::new(),
         }
     }
 
@@ -233,7 +252,7 @@ fn hex(d: &[u8]) -> String {
 /// Read an X3P file (see the module notes for what is supported).
 pub fn read(path: &Path) -> Result<X3p, X3pError> {
     let mut ar = Archive::open(path)?;
-    let xml_bytes = ar.entry(&ar.main_xml.clone())?;
+    let xml_bytes = ar.entry(&ar.main_xml.clone(), MAX_XML_BYTES)?;
     let xml = String::from_utf8_lossy(&xml_bytes);
     let xml = xml.trim_start_matches('\u{feff}');
     let doc = roxmltree::Document::parse(xml).map_err(|e| X3pError::Xml {
@@ -243,6 +262,13 @@ pub fn read(path: &Path) -> Result<X3p, X3pError> {
     let m = MainXml { doc: &doc, path };
     let l = Layout::read(&m)?;
     let (mut z, checksum_ok) = point_values(&mut ar, &m, &l)?;
+    if checksum_ok == Some(false) {
+        return Err(X3pError::Data {
+            path: path.to_path_buf(),
+            entry: ar.linked(&m.text("Record3/DataLink/PointDataLink").unwrap_or_default()),
+            message: "its MD5 differs from Record3/DataLink/MD5ChecksumPointData: the file is corrupted".into(),
+        });
+    }
     let valid = validity(&mut ar, &m, &z)?;
     for (v, ok) in z.iter_mut().zip(&valid) {
         // (no `+ 0.0` when there is no offset: it would turn −0.0 into +0.0)
@@ -259,6 +285,8 @@ pub fn read(path: &Path) -> Result<X3p, X3pError> {
         (Some(a), Some(b)) => Some(format!("{a} {b}")),
         (a, b) => a.or(b),
     };
+    let mut warnings = l.warnings.clone();
+    warnings.extend(plausibility(&z, &valid, &l));
     Ok(X3p {
         nx: l.nx,
         ny: l.ny,
@@ -271,6 +299,29 @@ pub fn read(path: &Path) -> Result<X3p, X3pError> {
         creator: m.text("Record2/Creator"),
         instrument,
         data_checksum_ok: checksum_ok,
+        warnings,
+    })
+}
+
+/// A warning when the height range is implausible for the lateral size: steeper on average than 10:1 over
+/// the whole surface, or flatter than 1 nm over it (a unit slip by 10³ or 10⁶ looks like one of these).
+fn plausibility(z: &[f64], valid: &[bool], l: &Layout) -> Option<String> {
+    let (lo, hi) = z
+        .iter()
+        .zip(valid)
+        .filter(|(_, v)| **v)
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), (z, _)| {
+            (a.min(*z), b.max(*z))
+        });
+    let range = hi - lo;
+    let side = (l.nx as f64 * l.pitch_mm[0]).max(l.ny as f64 * l.pitch_mm[1]);
+    if !(range.is_finite() && side > 0.0) {
+        return None;
+    }
+    (range > 10.0 * side || (range > 0.0 && range < 1e-6)).then(|| {
+        format!(
+            "the heights span {range:.3e} mm over a {side:.3e} mm surface: check the file's Z units (CZ/Increment, CZ/DataType)"
+        )
     })
 }
 
@@ -310,17 +361,30 @@ impl<'p> Archive<'p> {
         format!("{base}{}", link.trim_start_matches("./"))
     }
 
-    /// The bytes of one entry.
-    fn entry(&mut self, name: &str) -> Result<Vec<u8>, X3pError> {
-        let mut f = self.zip.by_name(name).map_err(|_| X3pError::MissingEntry {
+    /// The bytes of one entry, refused before anything is allocated when it declares more than `max` bytes,
+    /// and refused when it holds more than it declares (the declared size is the zip's, not the truth).
+    fn entry(&mut self, name: &str, max: u64) -> Result<Vec<u8>, X3pError> {
+        let f = self.zip.by_name(name).map_err(|_| X3pError::MissingEntry {
             path: self.path.to_path_buf(),
             entry: name.to_string(),
         })?;
-        let mut v = Vec::with_capacity(f.size() as usize);
-        f.read_to_end(&mut v).map_err(|source| X3pError::Io {
+        let too_big = |size: u64| X3pError::Data {
+            path: self.path.to_path_buf(),
+            entry: name.to_string(),
+            message: format!("{size} bytes, more than the {max} it may hold"),
+        };
+        let declared = f.size();
+        if declared > max {
+            return Err(too_big(declared));
+        }
+        let mut v = Vec::with_capacity(declared as usize);
+        f.take(max + 1).read_to_end(&mut v).map_err(|source| X3pError::Io {
             path: self.path.to_path_buf(),
             source,
         })?;
+        if v.len() as u64 > max {
+            return Err(too_big(v.len() as u64));
+        }
         Ok(v)
     }
 }
@@ -387,6 +451,8 @@ struct Layout {
     scale: f64,
     /// `CZ/Offset`, mm.
     offset_mm: f64,
+    /// What was read by a rule the file may not have meant.
+    warnings: Vec<String>,
 }
 
 impl Layout {
@@ -394,10 +460,16 @@ impl Layout {
         let nx = m.size("Record3/MatrixDimension/SizeX")?;
         let ny = m.size("Record3/MatrixDimension/SizeY")?;
         let nz = m.size("Record3/MatrixDimension/SizeZ")?;
-        if nx == 0 || ny == 0 || nz != 1 || nx.checked_mul(ny).is_none_or(|n| n > 1 << 30) {
+        if nx == 0 || ny == 0 || nz != 1 {
             return Err(m.err(
                 "Record3/MatrixDimension",
                 format!("unsupported size {nx}×{ny}×{nz} (an areal surface has SizeZ 1)"),
+            ));
+        }
+        if nx.checked_mul(ny).is_none_or(|n| n > MAX_POINTS) {
+            return Err(m.err(
+                "Record3/MatrixDimension",
+                format!("{nx}×{ny} points is more than this reader's limit of {MAX_POINTS}"),
             ));
         }
         let mut pitch_mm = [0.0; 2];
@@ -413,15 +485,45 @@ impl Layout {
             .text("Record1/Axes/CZ/DataType")
             .and_then(|t| t.chars().next())
             .ok_or_else(|| m.err("Record1/Axes/CZ/DataType", "missing".into()))?;
-        let inc = m.num_or("Record1/Axes/CZ/Increment", 1.0)?;
+        let inc_route = "Record1/Axes/CZ/Increment";
+        let inc = m.num_or(inc_route, 1.0)?;
         let offset = m.num_or("Record1/Axes/CZ/Offset", 0.0)?;
+        if !offset.is_finite() {
+            return Err(m.err(
+                "Record1/Axes/CZ/Offset",
+                format!("must be a finite length in m, got {offset}"),
+            ));
+        }
+        let mut warnings = Vec::new();
+        let float = matches!(data_type, 'D' | 'F');
+        let legacy = float
+            && inc == 1.0e-3
+            && m.text("Record2/Creator").is_some_and(|c| c.starts_with("brdfmill"))
+            && m.text("Record2/Comment").is_some_and(|c| c.contains("stored in mm"));
+        let scale = if float && !legacy {
+            if inc != 1.0 {
+                warnings.push(format!(
+                    "{inc_route} = {inc} is not applied to floating-point heights (ISO 25178-72: the values are metres); a writer that meant it produced heights {inc} times these"
+                ));
+            }
+            1000.0
+        } else {
+            if !(inc.is_finite() && inc > 0.0) {
+                return Err(m.err(
+                    inc_route,
+                    format!("must be a positive length in m for data type {data_type}, got {inc}"),
+                ));
+            }
+            inc * 1000.0
+        };
         Ok(Self {
             nx,
             ny,
             pitch_mm,
             data_type,
-            scale: inc * 1000.0,
+            scale,
             offset_mm: offset * 1000.0,
+            warnings,
         })
     }
 }
@@ -443,10 +545,6 @@ fn binary_values(ar: &mut Archive, m: &MainXml, l: &Layout, link: &str) -> Resul
     let (nx, ny, data_type) = (l.nx, l.ny, l.data_type);
     let n = nx * ny;
     let entry = ar.linked(link);
-    let bytes = ar.entry(&entry)?;
-    let checksum_ok = m
-        .text("Record3/DataLink/MD5ChecksumPointData")
-        .map(|want| hex(&Md5::digest(&bytes)).eq_ignore_ascii_case(want.trim()));
     let width = match data_type {
         'D' => 8,
         'F' | 'L' => 4,
@@ -458,6 +556,10 @@ fn binary_values(ar: &mut Archive, m: &MainXml, l: &Layout, link: &str) -> Resul
             ))
         }
     };
+    let bytes = ar.entry(&entry, (n * width) as u64)?;
+    let checksum_ok = m
+        .text("Record3/DataLink/MD5ChecksumPointData")
+        .map(|want| hex(&Md5::digest(&bytes)).eq_ignore_ascii_case(want.trim()));
     if bytes.len() != n * width {
         return Err(X3pError::Data {
             path: m.path.to_path_buf(),
@@ -510,9 +612,13 @@ fn listed_values(m: &MainXml, l: &Layout, list: roxmltree::Node) -> Result<Vec<f
 fn validity(ar: &mut Archive, m: &MainXml, z: &[f64]) -> Result<Vec<bool>, X3pError> {
     let n = z.len();
     let mut valid: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
-    if let Some(link) = m.text("Record3/ValidPointsLink") {
+    // The schema puts it in the DataLink record; some writers put it beside it.
+    let link = m
+        .text("Record3/DataLink/ValidPointsLink")
+        .or_else(|| m.text("Record3/ValidPointsLink"));
+    if let Some(link) = link {
         let entry = ar.linked(&link);
-        let bits = ar.entry(&entry)?;
+        let bits = ar.entry(&entry, n.div_ceil(8) as u64 + 64)?;
         if bits.len() * 8 < n {
             return Err(X3pError::Data {
                 path: m.path.to_path_buf(),
@@ -551,7 +657,7 @@ fn main_xml(hf: &Heightfield, data_md5: &str) -> String {
       <CZ>
         <AxisType>A</AxisType>
         <DataType>D</DataType>
-        <Increment>1.0E-3</Increment>
+        <Increment>1</Increment>
         <Offset>0</Offset>
       </CZ>
     </Axes>
@@ -570,7 +676,7 @@ fn main_xml(hf: &Heightfield, data_md5: &str) -> String {
       <Type>Software</Type>
       <Identification>brdfmill</Identification>
     </ProbingSystem>
-    <Comment>Heights stored in mm: z [m] = 1.0E-3 * value.</Comment>
+    <Comment>Heights in metres (float64), as ISO 25178-72 defines floating-point data.</Comment>
   </Record2>
   <Record3>
     <MatrixDimension>
@@ -596,14 +702,14 @@ fn main_xml(hf: &Heightfield, data_md5: &str) -> String {
 }
 
 /// Write a heightfield as an X3P file, atomically: `main.xml` (Records 1–4), `bindata/data.bin` (f64
-/// little-endian, heights in mm with `CZ/Increment = 1.0E-3`, see the module notes) with its MD5 in
+/// little-endian, heights in metres, see the module notes) with its MD5 in
 /// `MD5ChecksumPointData`, and `md5checksum.hex` (the MD5 of `main.xml`).
 pub fn write(path: &Path, hf: &Heightfield) -> Result<(), X3pError> {
     hf.check_invariants().map_err(|message| X3pError::Invalid {
         path: path.to_path_buf(),
         message,
     })?;
-    let data: Vec<u8> = hf.z_mm.iter().flat_map(|v| v.to_le_bytes()).collect();
+    let data: Vec<u8> = hf.z_mm.iter().flat_map(|v| (v * 1e-3).to_le_bytes()).collect();
     let xml = main_xml(hf, &hex(&Md5::digest(&data)));
     let sum = format!("{} *main.xml\n", hex(&Md5::digest(xml.as_bytes())));
     crate::io::write_atomic_with(path, |w| {
@@ -629,43 +735,4 @@ pub fn write(path: &Path, hf: &Heightfield) -> Result<(), X3pError> {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn writes_and_reads_back_bit_identical() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut hf = Heightfield::flat(7, 5, 0.0025, false, 0.0);
-        for (k, v) in hf.z_mm.iter_mut().enumerate() {
-            *v = -((k as f64) * 0.1234567).sin().abs() * 1e-3 / 3.0;
-        }
-        let p = dir.path().join("s.x3p");
-        write(&p, &hf).unwrap();
-        let r = read(&p).unwrap();
-        assert_eq!((r.nx, r.ny), (7, 5));
-        assert_eq!(r.invalid_count(), 0);
-        assert_eq!(r.data_checksum_ok, Some(true));
-        assert!((r.pitch_x_mm - 0.0025).abs() < 1e-15);
-        let a: Vec<u64> = hf.z_mm.iter().map(|v| v.to_bits()).collect();
-        let b: Vec<u64> = r.z_mm.iter().map(|v| v.to_bits()).collect();
-        assert_eq!(a, b);
-    }
-
-    #[test]
-    fn refuses_non_finite_heights_and_garbage() {
-        let dir = tempfile::tempdir().unwrap();
-        let mut hf = Heightfield::flat(3, 3, 0.01, false, 0.0);
-        hf.z_mm[4] = f64::NAN;
-        let p = dir.path().join("bad.x3p");
-        assert!(matches!(write(&p, &hf), Err(X3pError::Invalid { .. })));
-        assert!(!p.exists());
-        std::fs::write(&p, b"not a zip").unwrap();
-        assert!(matches!(read(&p), Err(X3pError::Zip { .. })));
-    }
-
-    #[test]
-    fn fills_invalid_points_from_neighbours() {
-        let s = X3p::from_grid(3, 1, 0.001, vec![1.0, f64::NAN, 3.0], vec![true, false, true]);
-        assert_eq!(s.heightfield().unwrap().z_mm, vec![1.0, 2.0, 3.0]);
-    }
-}
+mod tests;
