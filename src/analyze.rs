@@ -48,15 +48,9 @@ pub enum AnalyzeError {
     /// The X3P file could not be read.
     #[error(transparent)]
     X3p(#[from] crate::x3p::X3pError),
-    /// The `.npy` file could not be read.
-    #[error("{path}: {source}")]
-    Npy {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        #[source]
-        source: crate::npy::NpyError,
-    },
+    /// The `.npy` file could not be read (the error names it).
+    #[error(transparent)]
+    Npy(#[from] crate::npy::NpyError),
     /// The input is unusable (named file, reason).
     #[error("{path}: {message}")]
     Input {
@@ -181,10 +175,7 @@ fn load(path: &Path, cfg: &Config) -> Result<Loaded, AnalyzeError> {
             if !(pitch.is_finite() && pitch > 0.0) {
                 return Err(input(format!("--pitch-um must be positive, got {pitch}")));
             }
-            let (ny, nx, z) = crate::npy::read_f64_2d(path).map_err(|source| AnalyzeError::Npy {
-                path: path.to_path_buf(),
-                source,
-            })?;
+            let (ny, nx, z) = crate::npy::read_f64_2d(path)?;
             let valid: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
             let missing = valid.iter().filter(|v| !**v).count();
             let x = crate::x3p::X3p::from_grid(nx, ny, pitch * 1e-3, z, valid.clone());

@@ -283,11 +283,35 @@ impl RglBsdf {
         if nt == 0 || np == 0 {
             return Err("theta_i and phi_i must not be empty".into());
         }
+        // radians; f32 in the file, so π/2 may come out a few ulps above
+        for (name, axis, hi) in [
+            ("theta_i", &theta_i, std::f64::consts::FRAC_PI_2),
+            ("phi_i", &phi_i, std::f64::consts::TAU),
+        ] {
+            if axis.iter().any(|v| !(v.is_finite() && (-1e-6..=hi + 1e-6).contains(v))) {
+                return Err(format!("`{name}` must hold angles in [0, {hi:.6}] rad, got {axis:?}"));
+            }
+            if axis.windows(2).any(|w| !(w[1] > w[0])) {
+                return Err(format!("`{name}` must be strictly increasing, got {axis:?}"));
+            }
+        }
         let grid2 = |name: &str| -> Result<Grid2, String> {
             let f = tf.field(name, 2)?;
             let (ny, nx) = (f.shape[0], f.shape[1]);
             if nx < 2 || ny < 2 {
                 return Err(format!("field `{name}` shape {:?}: need at least 2×2", f.shape));
+            }
+            // RGL stores [φ, θ]: θ is the long axis (128 in the published files), φ has 2 rows when isotropic
+            if nx < 8 || ny > nx {
+                return Err(format!(
+                    "field `{name}` shape {:?}: expected [φ, θ] with at least 8 θ samples and no more φ than θ (are the axes swapped?)",
+                    f.shape
+                ));
+            }
+            if let Some(v) = f.data.iter().find(|v| !(v.is_finite() && v.abs() <= 1e12)) {
+                return Err(format!(
+                    "field `{name}` holds {v}: not a finite density of at most 1e12"
+                ));
             }
             Ok(Grid2 {
                 nx,

@@ -138,7 +138,12 @@ impl TabulatedNdf {
             periodic,
         };
         let mass = table.projected_mass();
-        if mass <= 0.0 || !mass.is_finite() {
+        if !mass.is_finite() {
+            return Err(format!(
+                "the values are too large: their projected mass is {mass} (each value must keep the integral finite)"
+            ));
+        }
+        if mass <= 0.0 {
             return Err("all values are zero: the distribution has no mass".to_string());
         }
         table.values.iter_mut().for_each(|v| *v /= mass);

@@ -1,7 +1,7 @@
 //! `brdfmill analyze`: a measured (X3P) or simulated (.npy) surface → NDF and BRDF, geometric and wave,
 //! with a report.
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use brdfmill::analyze::{self, Config};
 use std::path::PathBuf;
 
@@ -35,7 +35,8 @@ pub fn run(a: &Args) -> Result<()> {
         sigma_um: a.sigma_um,
         windows: a.windows,
     };
-    let r = analyze::run(&cfg, &a.surface, &a.out).with_context(|| format!("analysing {}", a.surface.display()))?;
+    // every error of the analysis names the file and the field
+    let r = analyze::run(&cfg, &a.surface, &a.out)?;
     println!(
         "{}: {}×{} at {:.3} µm, {} missing points; slope covariance [[{:.3e}, {:.3e}], [{:.3e}, {:.3e}]]",
         r.source,

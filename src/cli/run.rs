@@ -20,6 +20,13 @@ pub struct Args {
 pub fn run(a: &Args) -> Result<()> {
     let t0 = std::time::Instant::now();
     let ready = Job::load(&a.job)?;
+    // the output folder before any work: an existing file there, or a folder that cannot be made, would
+    // otherwise fail only after the first stage
+    if a.out.exists() && !a.out.is_dir() {
+        anyhow::bail!("--out {}: exists and is not a folder", a.out.display());
+    }
+    std::fs::create_dir_all(&a.out)
+        .map_err(|e| anyhow::anyhow!("--out {}: cannot create the folder: {e}", a.out.display()))?;
     println!("job       {} ({})", ready.job.name, a.job.display());
     let style = ProgressStyle::with_template("{spinner} {prefix:>9}  {msg} {elapsed}").unwrap();
     let mut bar: Option<ProgressBar> = None;

@@ -118,13 +118,15 @@ impl FacetsConfig {
     /// Check every field; the error names it.
     pub fn validate(&self) -> Result<(), FacetsError> {
         let bad = |field, reason: String| Err(FacetsError::Config { field, reason });
-        if self.facets_x == 0 || self.facets_y == 0 || self.facets_x * self.facets_y < 4 {
+        // checked: a product that wraps would pass any bound
+        let count = self.facets_x.checked_mul(self.facets_y);
+        if self.facets_x == 0 || self.facets_y == 0 || count.is_some_and(|n| n < 4) {
             return bad(
                 "facets",
                 format!("must be at least 2×2 facets, got {}x{}", self.facets_x, self.facets_y),
             );
         }
-        if self.facets_x * self.facets_y > 1 << 20 {
+        if count.is_none_or(|n| n > 1 << 20) {
             return bad(
                 "facets",
                 format!("{}x{} is more than 2^20 facets", self.facets_x, self.facets_y),
@@ -172,6 +174,30 @@ impl FacetsConfig {
             return bad(
                 "max_slope_deg",
                 format!("must be in (0, 89) degrees, got {}", self.max_slope_deg),
+            );
+        }
+        if self.lloyd_iterations > 10_000 {
+            return bad(
+                "lloyd_iterations",
+                format!("must be at most 10000, got {}", self.lloyd_iterations),
+            );
+        }
+        // annealing work is sweeps × facets swap proposals
+        let work = self.anneal.sweeps as f64 * (self.facets_x * self.facets_y) as f64;
+        if work > 1e11 {
+            return bad(
+                "anneal.sweeps",
+                format!(
+                    "{} sweeps of {} facets is {work:.2e} swap proposals (limit 1e11, about an hour)",
+                    self.anneal.sweeps,
+                    self.facets_x * self.facets_y
+                ),
+            );
+        }
+        if self.anneal.random_baselines > 10_000 {
+            return bad(
+                "anneal.random_baselines",
+                format!("must be at most 10000, got {}", self.anneal.random_baselines),
             );
         }
         if self.cvt_supersample == 0 || self.cvt_supersample > 16 {

@@ -214,12 +214,7 @@ impl Job {
                 "`toolpath.area_mm` must be positive, got [{ax}, {ay}]"
             )));
         }
-        if job.simulate.pitch_um.is_nan() || job.simulate.pitch_um <= 0.0 {
-            return Err(invalid(format!(
-                "`simulate.pitch_um` must be positive, got {}",
-                job.simulate.pitch_um
-            )));
-        }
+        check_work(&job, tool.radius_mm()).map_err(invalid)?;
         job.verify.validate().map_err(|e| invalid(e.to_string()))?;
         Ok(Ready {
             job,
@@ -229,6 +224,66 @@ impl Job {
             machine_path,
         })
     }
+}
+
+/// The most finishing passes a job may ask for (a 1 µm scallop with a 0.5 mm ball is 45 µm apart: 2,700
+/// passes over 120 mm).
+pub const MAX_PASSES: f64 = 200_000.0;
+
+/// The most simulated stock cells (8 bytes each: 4 GB).
+pub const MAX_SIM_CELLS: f64 = 5e8;
+
+/// Bound the work of the toolpath and simulate stages before anything runs: the stepover (from the scallop
+/// or given) and the pass count it implies, the simulation's cell count and arc tolerance. The message
+/// names the key and gives the estimate.
+fn check_work(job: &Job, r_mm: f64) -> Result<(), String> {
+    let t = &job.toolpath;
+    let [ax, ay] = t.area_mm;
+    let stepover = if t.stepover_mm != 0.0 {
+        if !(t.stepover_mm.is_finite() && t.stepover_mm > 0.0) {
+            return Err(format!(
+                "`toolpath.stepover_mm` must be a positive length (or 0: from the scallop), got {}",
+                t.stepover_mm
+            ));
+        }
+        t.stepover_mm
+    } else {
+        let h = t.scallop_um * 1e-3;
+        if !(h.is_finite() && h > 0.0 && h < r_mm) {
+            return Err(format!(
+                "`toolpath.scallop_um` must be in (0, {}) µm for the {} mm ball, got {}",
+                r_mm * 1e3,
+                2.0 * r_mm,
+                t.scallop_um
+            ));
+        }
+        crate::toolpath::raster::stepover_for_scallop(r_mm, h)
+    };
+    let passes = ax.hypot(ay) / stepover;
+    if passes > MAX_PASSES {
+        return Err(format!(
+            "the stepover {stepover:.3e} mm (`toolpath.scallop_um` = {} / `toolpath.stepover_mm` = {}) needs about {passes:.3e} passes over {ax}×{ay} mm, more than {MAX_PASSES:e}",
+            t.scallop_um, t.stepover_mm
+        ));
+    }
+    let p = job.simulate.pitch_um;
+    if !(p.is_finite() && p > 0.0) {
+        return Err(format!("`simulate.pitch_um` must be positive, got {p}"));
+    }
+    let margin_mm = 2.0 * r_mm + 1.0;
+    let cells = ((ax + margin_mm) / (p * 1e-3)) * ((ay + margin_mm) / (p * 1e-3));
+    if cells > MAX_SIM_CELLS {
+        return Err(format!(
+            "`simulate.pitch_um` = {p} over {ax}×{ay} mm is about {cells:.3e} stock cells, more than {MAX_SIM_CELLS:e} (8 bytes each)"
+        ));
+    }
+    let a = job.simulate.arc_tolerance_um;
+    if !(a.is_finite() && (1e-3..=100.0).contains(&a)) {
+        return Err(format!(
+            "`simulate.arc_tolerance_um` must be in [0.001, 100] µm, got {a}"
+        ));
+    }
+    Ok(())
 }
 
 /// Paths in `merl:`, `rgl:` and `csv:` specs are relative to the job file.

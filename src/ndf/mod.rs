@@ -109,8 +109,17 @@ impl NdfConfig {
                 &format!("must be in [0, 45) degrees, got {td}"),
             );
         }
-        if self.half_angle.phi_d_samples == 0 {
-            return bad("half_angle.phi_d_samples", "must be at least 1");
+        if !(1..=4096).contains(&self.half_angle.phi_d_samples) {
+            return bad("half_angle.phi_d_samples", "must be in 1..=4096");
+        }
+        if self.iterations > 100_000 {
+            return bad(
+                "iterations",
+                &format!(
+                    "must be at most 100000 (each is a pair of FFT convolutions), got {}",
+                    self.iterations
+                ),
+            );
         }
         Ok(())
     }
