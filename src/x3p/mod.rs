@@ -494,6 +494,9 @@ impl Layout {
                 format!("must be a finite length in m, got {offset}"),
             ));
         }
+        if !(inc.is_finite() && inc != 0.0) {
+            return Err(m.err(inc_route, format!("must be a finite, non-zero length in m, got {inc}")));
+        }
         let mut warnings = Vec::new();
         let float = matches!(data_type, 'D' | 'F');
         let legacy = float

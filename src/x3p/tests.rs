@@ -137,3 +137,12 @@ fn an_implausible_height_range_is_warned_about() {
     let r = read(&p).unwrap();
     assert!(r.warnings.iter().any(|w| w.contains("Z units")), "{:?}", r.warnings);
 }
+
+#[test]
+fn a_non_finite_increment_names_its_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("n.x3p");
+    std::fs::write(&p, zip_of(&xml(6, 5, "NaN", "t", ""), &metres(30))).unwrap();
+    let e = read(&p).unwrap_err().to_string();
+    assert!(e.contains("CZ/Increment") && e.contains("n.x3p"), "{e}");
+}
