@@ -1,4 +1,8 @@
 //! `brdfmill run JOB.toml --out DIR`: the whole pipeline.
+//!
+//! Exit codes: 0 when the verdict passes (or the run stopped at `--until` before verification, or
+//! `--allow-shortfall` was given), [`EXIT_SHORTFALL`] (3) when the run completed and the milled surface falls
+//! short of a tolerance, 1 for a refused job or a failed stage, 2 for a bad command line.
 
 use anyhow::Result;
 use brdfmill::job::{self, Job, Stage};
@@ -6,20 +10,33 @@ use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Duration;
 
+/// Exit code of a completed run whose milled surface falls short of its tolerances.
+pub const EXIT_SHORTFALL: i32 = 3;
+
 /// Arguments of `brdfmill run`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The job file (TOML; see examples/ and `brdfmill::job`)
+    /// The job file (TOML; every key in docs/JOB.md)
     pub job: PathBuf,
     /// Output folder for every artifact and the report
     #[arg(long)]
     pub out: PathBuf,
+    /// Stop after this stage: ndf, facets, toolpath (G-code only: no simulation or verification), simulate
+    #[arg(long, value_parser = ["ndf", "facets", "toolpath", "simulate", "verify"], default_value = "verify")]
+    pub until: String,
+    /// Override a job key, e.g. --set facets.seed=3 --set toolpath.scallop_um=0.5 (TOML values; repeatable)
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Exit 0 even when the milled surface falls short (the artifacts are written either way)
+    #[arg(long)]
+    pub allow_shortfall: bool,
 }
 
-/// Run the subcommand.
-pub fn run(a: &Args) -> Result<()> {
+/// Run the subcommand; returns the exit code.
+pub fn run(a: &Args) -> Result<i32> {
     let t0 = std::time::Instant::now();
-    let ready = Job::load(&a.job)?;
+    let until = Stage::parse(&a.until).unwrap_or(Stage::Verify);
+    let ready = Job::load_with(&a.job, &a.set)?;
     // the output folder before any work: an existing file there, or a folder that cannot be made, would
     // otherwise fail only after the first stage
     if a.out.exists() && !a.out.is_dir() {
@@ -48,12 +65,60 @@ pub fn run(a: &Args) -> Result<()> {
             b.finish_with_message("done in");
         }
     };
-    let outcome = job::run(&ready, &a.out, &mut progress)?;
-    let m = &outcome.metrics;
+    let outcome = job::run(&ready, &a.out, until, &mut progress)?;
+    Ok(summary(a, &ready.job.toolpath, &outcome, t0.elapsed().as_secs_f64()))
+}
+
+/// The closing summary; returns the exit code.
+fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outcome, total_s: f64) -> i32 {
     println!();
     for (stage, s) in &outcome.timings {
         println!("{:>9}  {:6.2} s", stage.name(), s);
     }
+    if let Some(r) = outcome.relief_mm {
+        println!("relief    {r:.3} mm (design tile)");
+    }
+    if let Some(p) = &outcome.program {
+        println!(
+            "program   {} — {} lines, estimated {} of machining, cuts to {:.3} mm; tools: {}",
+            a.out.join("program.nc").display(),
+            p.lines,
+            brdfmill::toolpath::hms(p.estimated_s),
+            p.depth_mm,
+            tools(t)
+        );
+    }
+    let code = match &outcome.metrics {
+        Some(m) => verdict(m, a.allow_shortfall),
+        None => {
+            println!("verdict   none: stopped after `{}` (--until)", a.until);
+            0
+        }
+    };
+    println!(
+        "wrote     {} files, {:.1} MB, to {}",
+        outcome.artifacts.len(),
+        outcome.bytes_written as f64 / 1e6,
+        a.out.display()
+    );
+    if let Some(r) = &outcome.report {
+        println!("report    {}", r.display());
+    }
+    println!("total     {total_s:.1} s");
+    code
+}
+
+/// The tools in the order the program uses them.
+fn tools(t: &brdfmill::toolpath::ToolpathConfig) -> String {
+    if t.rough_tool.is_empty() || t.rough_tool == t.tool {
+        t.tool.clone()
+    } else {
+        format!("{} (roughing), then {}", t.rough_tool, t.tool)
+    }
+}
+
+/// Print the figures and the verdict; the exit code.
+fn verdict(m: &brdfmill::verify::Metrics, allow_shortfall: bool) -> i32 {
     println!(
         "design    NDF corr {:.4}, L1 {:.4}, JS {:.4}, variance ratio [{:.3}, {:.3}]",
         m.design.ndf_corr, m.design.ndf_l1, m.design.ndf_js, m.design.cov_ratio[0], m.design.cov_ratio[1]
@@ -73,8 +138,9 @@ pub fn run(a: &Args) -> Result<()> {
     for n in &m.notes {
         println!("          - {n}");
     }
-    println!("wrote     {} files to {}", outcome.artifacts.len(), a.out.display());
-    println!("report    {}", outcome.report.display());
-    println!("total     {:.1} s", t0.elapsed().as_secs_f64());
-    Ok(())
+    if m.pass || allow_shortfall {
+        0
+    } else {
+        EXIT_SHORTFALL
+    }
 }

@@ -152,12 +152,22 @@ pub struct Ready {
 impl Job {
     /// Read a job file and check everything that can be checked before work starts.
     pub fn load(path: &Path) -> Result<Ready, JobError> {
+        Job::load_with(path, &[])
+    }
+
+    /// [`Job::load`] with `section.key=value` overrides applied to the file first (the value is TOML: a
+    /// number, `true`, `"text"` or `[1, 2]`; a bare word is taken as a string). Each override must name a key
+    /// of the job's format, so a typo is refused like one in the file.
+    pub fn load_with(path: &Path, overrides: &[String]) -> Result<Ready, JobError> {
         let invalid = |reason: String| JobError::Invalid {
             path: path.display().to_string(),
             reason,
         };
         let text = std::fs::read_to_string(path).map_err(|e| invalid(format!("cannot read the job file: {e}")))?;
-        let raw: toml::Value = toml::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+        let mut raw: toml::Value = toml::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+        for o in overrides {
+            apply_override(&mut raw, o).map_err(|e| invalid(format!("--set {o}: {e}")))?;
+        }
         match raw.get("version").and_then(|v| v.as_integer()) {
             Some(v) if v == VERSION as i64 => {}
             Some(v) => {
@@ -167,7 +177,12 @@ impl Job {
             }
             None => return Err(invalid(format!("missing `version` (expected version = {VERSION})"))),
         }
-        let job: Job = toml::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+        let job: Job = if overrides.is_empty() {
+            // from the text, so an error names its line and column
+            toml::from_str(&text).map_err(|e| invalid(e.to_string()))?
+        } else {
+            raw.try_into().map_err(|e: toml::de::Error| invalid(e.to_string()))?
+        };
         let dir = path
             .parent()
             .map(Path::to_path_buf)
@@ -224,6 +239,30 @@ impl Job {
             machine_path,
         })
     }
+}
+
+/// Set `section.key=value` (dotted path, TOML value) in a parsed job.
+fn apply_override(raw: &mut toml::Value, o: &str) -> Result<(), String> {
+    let (key, value) = o.split_once('=').ok_or("expected SECTION.KEY=VALUE")?;
+    let path: Vec<&str> = key.trim().split('.').map(str::trim).collect();
+    if path.iter().any(|p| p.is_empty()) {
+        return Err(format!("`{key}` is not a dotted key"));
+    }
+    let value = value.trim();
+    let parsed: toml::Value = toml::from_str::<toml::Table>(&format!("v = {value}"))
+        .ok()
+        .and_then(|mut t| t.remove("v"))
+        .unwrap_or_else(|| toml::Value::String(value.to_string()));
+    let mut node = raw;
+    for part in &path[..path.len() - 1] {
+        let table = node.as_table_mut().ok_or_else(|| format!("`{part}` is not a section"))?;
+        node = table
+            .entry(part.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+    }
+    let table = node.as_table_mut().ok_or_else(|| format!("`{key}` is not inside a section"))?;
+    table.insert(path[path.len() - 1].to_string(), parsed);
+    Ok(())
 }
 
 /// The most finishing passes a job may ask for (a 1 µm scallop with a 0.5 mm ball is 45 µm apart: 2,700

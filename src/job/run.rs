@@ -11,8 +11,8 @@ use crate::toolpath::{self, raster, ToolpathConfig};
 use crate::verify::{self, report, Metrics, VerifyInput};
 use std::path::{Path, PathBuf};
 
-/// Pipeline stages, for progress reporting.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+/// Pipeline stages, in order (for progress reporting and `--until`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Stage {
     /// BRDF → NDF.
     Ndf,
@@ -37,18 +37,50 @@ impl Stage {
             Stage::Verify => "verify",
         }
     }
+
+    /// The stage of a name (`ndf`, `facets`, `toolpath`, `simulate`, `verify`).
+    pub fn parse(s: &str) -> Option<Stage> {
+        [Stage::Ndf, Stage::Facets, Stage::Toolpath, Stage::Simulate, Stage::Verify]
+            .into_iter()
+            .find(|st| st.name() == s)
+    }
 }
+
+/// The name of the run-state file in the output folder: `"state": "running"` from the first stage until the
+/// last one asked for has written its artifacts, then `"complete"`. A run that was interrupted (Ctrl-C, a
+/// crash, a full disk) leaves `"running"` behind, so its folder never passes for a finished run.
+pub const RUN_STATE: &str = "run.json";
 
 /// What the run produced.
 pub struct Outcome {
-    /// The metrics.
-    pub metrics: Metrics,
+    /// The metrics (`None` when the run stopped before verification).
+    pub metrics: Option<Metrics>,
+    /// The program's numbers (`None` when the run stopped before the toolpath).
+    pub program: Option<toolpath::Summary>,
+    /// The tile's relief (highest minus lowest point), mm (`None` before the facets).
+    pub relief_mm: Option<f64>,
     /// Files written, in order.
     pub artifacts: Vec<PathBuf>,
+    /// Bytes written in all.
+    pub bytes_written: u64,
     /// Per stage, seconds.
     pub timings: Vec<(Stage, f64)>,
-    /// The report's path.
-    pub report: PathBuf,
+    /// The report's path (`None` before verification).
+    pub report: Option<PathBuf>,
+}
+
+/// `run.json`: the state of the run in its folder (see [`RUN_STATE`]).
+fn write_state(o: &mut Out, job: &str, done: &[(Stage, f64)], state: &str) -> Result<(), JobError> {
+    let v = serde_json::json!({
+        "format": "brdfmill-run",
+        "version": 1,
+        "job": job,
+        "state": state,
+        "stages_done": done.iter().map(|(s, _)| s.name()).collect::<Vec<_>>(),
+    });
+    let p = o.dir.join(RUN_STATE);
+    crate::io::write_atomic(&p, serde_json::to_string_pretty(&v).unwrap_or_default().as_bytes())?;
+    Ok(())
 }
 
 fn stage_error(stage: &'static str, e: impl std::fmt::Display) -> JobError {
@@ -87,9 +119,14 @@ impl Out<'_> {
     }
 }
 
-/// Run every stage in order, writing each artifact to `out` as it is made. `progress(stage, started)` is
-/// called when a stage starts (`true`) and ends (`false`).
-pub fn run(ready: &Ready, out: &Path, progress: &mut dyn FnMut(Stage, bool)) -> Result<Outcome, JobError> {
+/// Run the stages in order up to and including `until`, writing each artifact to `out` as it is made.
+/// `progress(stage, started)` is called when a stage starts (`true`) and ends (`false`).
+pub fn run(
+    ready: &Ready,
+    out: &Path,
+    until: Stage,
+    progress: &mut dyn FnMut(Stage, bool),
+) -> Result<Outcome, JobError> {
     let job = &ready.job;
     let mut o = Out {
         dir: out,
@@ -116,13 +153,41 @@ pub fn run(ready: &Ready, out: &Path, progress: &mut dyn FnMut(Stage, bool)) -> 
         raster::stepover_for_scallop(r, job.toolpath.scallop_um * 1e-3)
     };
 
+    let name = job.name.clone();
+    let finish = |o: Out, timings: Vec<(Stage, f64)>, mut outcome: Outcome| -> Result<Outcome, JobError> {
+        let mut o = o;
+        write_state(&mut o, &name, &timings, "complete")?;
+        outcome.bytes_written = o.written.iter().filter_map(|p| std::fs::metadata(p).ok()).map(|m| m.len()).sum();
+        outcome.artifacts = o.written;
+        outcome.timings = timings;
+        Ok(outcome)
+    };
+    let mut outcome = Outcome {
+        metrics: None,
+        program: None,
+        relief_mm: None,
+        artifacts: vec![],
+        bytes_written: 0,
+        timings: vec![],
+        report: None,
+    };
+    write_state(&mut o, &job.name, &timings, "running")?;
     step(Stage::Ndf, &mut timings, true);
     let nd = ndf_stage(ready, r, stepover, &mut o)?;
     step(Stage::Ndf, &mut timings, false);
+    write_state(&mut o, &job.name, &timings, "running")?;
+    if until == Stage::Ndf {
+        return finish(o, timings, outcome);
+    }
 
     step(Stage::Facets, &mut timings, true);
     let (tile, tile_png) = facets_stage(ready, &nd.ndf, &mut o)?;
     step(Stage::Facets, &mut timings, false);
+    write_state(&mut o, &job.name, &timings, "running")?;
+    outcome.relief_mm = Some(tile.heightfield.range().1 - tile.heightfield.range().0);
+    if until == Stage::Facets {
+        return finish(o, timings, outcome);
+    }
 
     step(Stage::Toolpath, &mut timings, true);
     let mut tcfg = job.toolpath.clone();
@@ -134,6 +199,11 @@ pub fn run(ready: &Ready, out: &Path, progress: &mut dyn FnMut(Stage, bool)) -> 
     let summary = serde_json::to_string_pretty(&program.summary).map_err(stage_err("toolpath"))?;
     o.write("program.json", summary.as_bytes())?;
     step(Stage::Toolpath, &mut timings, false);
+    write_state(&mut o, &job.name, &timings, "running")?;
+    outcome.program = Some(program.summary.clone());
+    if until == Stage::Toolpath {
+        return finish(o, timings, outcome);
+    }
 
     step(Stage::Simulate, &mut timings, true);
     let shape = Shape::Ball {
@@ -141,6 +211,10 @@ pub fn run(ready: &Ready, out: &Path, progress: &mut dyn FnMut(Stage, bool)) -> 
     };
     let (sim, dev, sim_png, dev_png) = simulate_stage(ready, shape, &program.gcode, &tile.heightfield, &mut o)?;
     step(Stage::Simulate, &mut timings, false);
+    write_state(&mut o, &job.name, &timings, "running")?;
+    if until == Stage::Simulate {
+        return finish(o, timings, outcome);
+    }
 
     step(Stage::Verify, &mut timings, true);
     let v = verify::run(
@@ -177,18 +251,15 @@ pub fn run(ready: &Ready, out: &Path, progress: &mut dyn FnMut(Stage, bool)) -> 
         metrics: &v.metrics,
         figures,
         parameters: super::summary::parameters(ready, &nd.ndf, &tile, &sim),
-        program: super::summary::program(&program.summary),
+        program: super::summary::program(ready, &program.summary, outcome.relief_mm.unwrap_or(0.0)),
         artifacts: listed(&o.written),
     }
     .to_html();
     o.write("report.html", html.as_bytes())?;
     step(Stage::Verify, &mut timings, false);
-    Ok(Outcome {
-        metrics: v.metrics,
-        artifacts: o.written,
-        timings,
-        report: out.join("report.html"),
-    })
+    outcome.metrics = Some(v.metrics);
+    outcome.report = Some(out.join("report.html"));
+    finish(o, timings, outcome)
 }
 
 /// BRDF → NDF: the base lobe (the finishing raster's scallop lobe by default), Lucy–Richardson, `ndf.json`.

@@ -64,9 +64,35 @@ pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) 
     ]
 }
 
-/// The G-code table.
-pub(super) fn program(s: &Summary) -> Vec<(String, String)> {
+/// The G-code table: "To mill this" — what a machinist needs first, then the program's numbers.
+pub(super) fn program(ready: &Ready, s: &Summary, relief_mm: f64) -> Vec<(String, String)> {
+    let job = &ready.job;
+    let t = &job.toolpath;
+    let tools = if t.rough_tool.is_empty() || t.rough_tool == t.tool {
+        format!("`{}` for every pass", t.tool)
+    } else {
+        format!("`{}` (roughing), then `{}` (finishing)", t.rough_tool, t.tool)
+    };
     vec![
+        ("program".into(), "program.nc (summary in program.json)".into()),
+        ("estimated time".into(), toolpath::hms(s.estimated_s)),
+        ("tools, in order".into(), tools),
+        (
+            "stock and relief".into(),
+            format!(
+                "{:?}, at least {} × {} mm; the relief is {:.3} mm deep (design tile), the program cuts to {:.3} mm",
+                t.stock, t.area_mm[0], t.area_mm[1], relief_mm, s.depth_mm
+            ),
+        ),
+        (
+            "work zero".into(),
+            "X0 Y0 at the lower-left corner of the area, Z0 on the stock top (touch off there)".into(),
+        ),
+        (
+            "check, then stream".into(),
+            "brdfmill stream program.nc --port PORT --check: GRBL's check mode ($C) runs every line first without moving, and the job streams only if none errs (docs/MILLING.md)"
+                .into(),
+        ),
         ("lines".into(), s.lines.to_string()),
         (
             "stepover".into(),
@@ -83,7 +109,6 @@ pub(super) fn program(s: &Summary) -> Vec<(String, String)> {
             "path".into(),
             format!("{:.1} mm cutting, {:.1} mm rapid", s.feed_length_mm, s.rapid_length_mm),
         ),
-        ("estimated time".into(), toolpath::hms(s.estimated_s)),
         (
             "feed / spindle".into(),
             format!("{} mm/min, {} rpm", s.feed_mm_min, s.spindle_rpm),

@@ -131,7 +131,7 @@ impl Report<'_> {
         }
         h.push_str("<h2>Job parameters</h2>");
         h.push_str(&kv_table(&self.parameters));
-        h.push_str("<h2>G-code</h2>");
+        h.push_str("<h2>To mill this</h2>");
         h.push_str(&kv_table(&self.program));
         h.push_str("<h2>Artifacts</h2>");
         h.push_str(&kv_table(&self.artifacts));

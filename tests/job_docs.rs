@@ -1,0 +1,52 @@
+//! `docs/JOB.md` documents every key of the job format: the keys a job serialises to (every section, every
+//! default filled in) must each have a row in its tables, and every row must name a key the format has.
+
+use brdfmill::job::Job;
+use std::collections::BTreeSet;
+use std::path::Path;
+
+fn keys(prefix: &str, v: &toml::Value, out: &mut BTreeSet<String>) {
+    if let toml::Value::Table(t) = v {
+        for (k, v) in t {
+            let path = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+            match v {
+                toml::Value::Table(_) => keys(&path, v, out),
+                _ => {
+                    out.insert(path);
+                }
+            }
+        }
+    }
+}
+
+#[test]
+fn every_job_key_is_documented_and_every_documented_key_exists() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let ready = Job::load(&root.join("examples/default.toml")).unwrap();
+    let v = toml::Value::try_from(&ready.job).unwrap();
+    let mut have = BTreeSet::new();
+    keys("", &v, &mut have);
+    // optional keys that a job without them does not serialise
+    for k in ["target.polish"] {
+        have.insert(k.to_string());
+    }
+    let doc = std::fs::read_to_string(root.join("docs/JOB.md")).unwrap();
+    let documented: BTreeSet<String> = doc
+        .lines()
+        .filter_map(|l| l.strip_prefix("| `"))
+        .filter_map(|l| l.split_once('`').map(|(k, _)| k.to_string()))
+        .collect();
+    let missing: Vec<_> = have.difference(&documented).collect();
+    let unknown: Vec<_> = documented.difference(&have).collect();
+    assert!(missing.is_empty(), "keys without a row in docs/JOB.md: {missing:?}");
+    assert!(unknown.is_empty(), "rows in docs/JOB.md for keys the format does not have: {unknown:?}");
+}
+
+#[test]
+fn print_defaults() {
+    use brdfmill::*;
+    println!("{}", toml::to_string(&ndf::NdfConfig::default()).unwrap());
+    println!("{}", toml::to_string(&facets::FacetsConfig::default()).unwrap());
+    println!("{}", toml::to_string(&toolpath::ToolpathConfig::default()).unwrap());
+    println!("{}", toml::to_string(&job::SimulateSection::default()).unwrap());
+}
