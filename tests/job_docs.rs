@@ -8,7 +8,11 @@ use std::path::Path;
 fn keys(prefix: &str, v: &toml::Value, out: &mut BTreeSet<String>) {
     if let toml::Value::Table(t) = v {
         for (k, v) in t {
-            let path = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+            let path = if prefix.is_empty() {
+                k.clone()
+            } else {
+                format!("{prefix}.{k}")
+            };
             match v {
                 toml::Value::Table(_) => keys(&path, v, out),
                 _ => {
@@ -39,7 +43,10 @@ fn every_job_key_is_documented_and_every_documented_key_exists() {
     let missing: Vec<_> = have.difference(&documented).collect();
     let unknown: Vec<_> = documented.difference(&have).collect();
     assert!(missing.is_empty(), "keys without a row in docs/JOB.md: {missing:?}");
-    assert!(unknown.is_empty(), "rows in docs/JOB.md for keys the format does not have: {unknown:?}");
+    assert!(
+        unknown.is_empty(),
+        "rows in docs/JOB.md for keys the format does not have: {unknown:?}"
+    );
 }
 
 #[test]

@@ -16,22 +16,19 @@ fn brdfmill(args: &[&str]) -> std::process::Output {
         .expect("run brdfmill")
 }
 
-/// Chromium, when installed (CI installs it and sets BRDFMILL_REQUIRE_EXTERNAL=1, making it mandatory).
-fn chromium() -> Option<&'static str> {
-    for c in ["chromium", "chromium-browser", "google-chrome"] {
-        if Command::new(c)
-            .arg("--version")
-            .output()
-            .is_ok_and(|o| o.status.success())
-        {
-            return Some(c);
-        }
-    }
-    if std::env::var("BRDFMILL_REQUIRE_EXTERNAL").is_ok() {
-        panic!("chromium is required here but not installed (Debian package chromium)");
-    }
-    eprintln!("note: chromium not installed; the report was not rendered in a browser");
-    None
+/// Chromium's command. The test that needs it is `#[ignore]`d, so that plain `cargo test` reports it as
+/// ignored rather than passing it; run with `cargo test -- --ignored` (as `.ci/run` does after installing
+/// it) it fails when no browser is installed.
+fn chromium() -> &'static str {
+    ["chromium", "chromium-browser", "google-chrome"]
+        .into_iter()
+        .find(|c| {
+            Command::new(c)
+                .arg("--version")
+                .output()
+                .is_ok_and(|o| o.status.success())
+        })
+        .expect("chromium is required by this test but not installed (apt-get install chromium)")
 }
 
 /// Pixels that only the report's images contain: viridis' dark purple end and the rendered spheres' greys
@@ -52,16 +49,70 @@ fn image_pixels(png_bytes: &[u8]) -> usize {
         .count()
 }
 
-#[test]
-fn default_job_produces_every_artifact_and_a_rendered_report() {
-    let out = tempfile::tempdir().unwrap();
+/// `brdfmill run examples/default.toml --out OUT`: it completes, with exit code 0 (passes) or 3 (falls
+/// short); which one is checked against the figures by the caller.
+fn run_default_job(out: &Path) -> std::process::Output {
     let job = root().join("examples/default.toml");
-    let t = std::time::Instant::now();
-    let o = brdfmill(&["run", job.to_str().unwrap(), "--out", out.path().to_str().unwrap()]);
-    let secs = t.elapsed().as_secs_f64();
+    let o = brdfmill(&["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    assert!(
+        matches!(o.status.code(), Some(0 | 3)),
+        "the job did not complete: {:?}\n{}\n{}",
+        o.status,
+        String::from_utf8_lossy(&o.stdout),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    o
+}
+
+fn json(path: &Path) -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
+}
+
+fn f(v: &serde_json::Value) -> f64 {
+    v.as_f64().unwrap_or_else(|| panic!("not a number: {v}"))
+}
+
+/// The verdict a surface's figures imply under the tolerances, worked out here from metrics.json's numbers
+/// alone (the rules of DESIGN.md §6 as `Tolerances` documents them): `(every check passes, failed names)`.
+fn verdict_from_numbers(s: &serde_json::Value, tol: &serde_json::Value) -> (bool, Vec<String>) {
+    let mut failed = vec![];
+    if f(&s["ndf_l1"]) > f(&tol["ndf_l1_max"]) {
+        failed.push("NDF relative L1".to_string());
+    }
+    if f(&s["ndf_corr"]) < f(&tol["ndf_corr_min"]) {
+        failed.push("NDF correlation".to_string());
+    }
+    if f(&s["ndf_js"]) > f(&tol["ndf_js_max"]) {
+        failed.push("NDF Jensen–Shannon (bits)".to_string());
+    }
+    let (lo, hi) = (f(&tol["cov_ratio"][0]), f(&tol["cov_ratio"][1]));
+    for (k, axis) in ["x", "y"].iter().enumerate() {
+        let c = f(&s["cov_ratio"][k]);
+        if !(lo..=hi).contains(&c) {
+            failed.push(format!("slope variance ratio ({axis})"));
+        }
+    }
+    if f(&s["peak_offset_deg"]) > f(&tol["peak_offset_deg_max"]) {
+        failed.push("peak direction offset (°)".to_string());
+    }
+    for a in s["albedo"].as_array().unwrap() {
+        if (f(&a["surface"]) / f(&a["target"]) - 1.0).abs() > f(&tol["albedo_rel_max"]) {
+            failed.push(format!("albedo at θi = {}° (relative error)", f(&a["theta_i_deg"])));
+        }
+    }
+    (failed.is_empty(), failed)
+}
+
+/// Every artifact, each checked against what the others and the job file say it is; the verdict in
+/// metrics.json, the closing summary and the report are the one the figures imply under the tolerances —
+/// whichever it is (the default job's shortfall is another issue's).
+#[test]
+fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
+    let out = tempfile::tempdir().unwrap();
+    let o = run_default_job(out.path());
     let stdout = String::from_utf8_lossy(&o.stdout);
-    assert!(o.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&o.stderr));
-    println!("{stdout}\nwall {secs:.1} s");
+    println!("{stdout}");
+    let p = |f: &str| out.path().join(f);
     for f in [
         "ndf.json",
         "ndf.png",
@@ -79,81 +130,239 @@ fn default_job_produces_every_artifact_and_a_rendered_report() {
         "metrics.json",
         "report.html",
     ] {
-        let p = out.path().join(f);
-        assert!(p.exists() && std::fs::metadata(&p).unwrap().len() > 0, "{f} missing");
+        assert!(p(f).exists(), "{f} missing");
     }
+    // Each image decodes as a PNG with pixels in it.
+    for f in ["ndf.png", "tile.png", "sim.png", "deviation.png", "wave.png"] {
+        let mut r = png::Decoder::new(std::fs::File::open(p(f)).unwrap())
+            .read_info()
+            .unwrap_or_else(|e| panic!("{f}: {e}"));
+        let mut buf = vec![0; r.output_buffer_size()];
+        let info = r.next_frame(&mut buf).unwrap_or_else(|e| panic!("{f}: {e}"));
+        assert!(
+            info.width >= 100 && info.height >= 100,
+            "{f}: {}×{}",
+            info.width,
+            info.height
+        );
+    }
+    // The tile is the job's 12 × 12 facets of 1 mm at 5 µm: 2400² samples (examples/default.toml).
+    let (rows, cols, _) = brdfmill::npy::read_f64_2d(&p("tile.npy")).unwrap();
+    assert_eq!((rows, cols), (2400, 2400), "tile.npy");
+    // A binary STL is an 80-byte header, a triangle count and 50 bytes per triangle.
+    let stl = std::fs::read(p("tile.stl")).unwrap();
+    let tris = u32::from_le_bytes(stl[80..84].try_into().unwrap()) as usize;
     assert!(
-        stdout.contains("report") && stdout.contains("report.html"),
-        "closing summary names the report"
+        tris > 0 && stl.len() == 84 + 50 * tris,
+        "tile.stl: {} bytes for {tris} triangles",
+        stl.len()
     );
-    // the metrics contract
-    let m: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(out.path().join("metrics.json")).unwrap()).unwrap();
+    // The program, its summary and the simulation's reading of it agree on its length; the finishing
+    // stepover is the one a 0.5 mm ball needs for 1 µm scallops: s = 2·√(2rh − h²) (a circle's chord).
+    let nc = std::fs::read_to_string(p("program.nc")).unwrap();
+    let pj = json(&p("program.json"));
+    let sj = json(&p("sim.json"));
+    assert_eq!(
+        nc.lines().count() as u64,
+        pj["lines"].as_u64().unwrap(),
+        "program.json lines"
+    );
+    assert_eq!(sj[0]["lines"], pj["lines"], "sim.json read another program");
+    assert_eq!(nc.lines().last().map(str::trim), Some("M2"));
+    let (r, h): (f64, f64) = (0.25, 1e-3);
+    let stepover = f(&pj["stepover_mm"]);
+    assert!(
+        (stepover - 2.0 * (2.0 * r * h - h * h).sqrt()).abs() < 1e-9,
+        "stepover {stepover} mm"
+    );
+    // The simulated heightfield is the grid sim.json describes, and its deepest cell is the one it reports.
+    let (rows, cols, z) = brdfmill::npy::read_f64_2d(&p("sim.npy")).unwrap();
+    assert_eq!(
+        [cols as u64, rows as u64],
+        [sj[1]["nx"].as_u64().unwrap(), sj[1]["ny"].as_u64().unwrap()]
+    );
+    let zmin = z.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!(
+        (zmin - f(&sj[0]["min_z_mm"])).abs() < 1e-12,
+        "sim.npy min {zmin}, sim.json {}",
+        sj[0]["min_z_mm"]
+    );
+
+    let m = json(&p("metrics.json"));
+    // The tolerances applied are the job's (default.toml sets none, so the documented defaults).
+    let job = Job::load(&root().join("examples/default.toml")).unwrap();
+    assert_eq!(
+        m["tolerances"],
+        serde_json::to_value(job.job.verify.tolerances).unwrap(),
+        "metrics.json states other tolerances than the job's"
+    );
+    let tol = &m["tolerances"];
+    // Each check's value is the figure it names, and its pass is that figure against the tolerance.
     for side in ["design", "milled"] {
-        for key in ["ndf_l1", "ndf_corr"] {
-            assert!(m[side][key].is_number(), "{side}.{key}");
+        let s = &m[side];
+        let (pass, failed) = verdict_from_numbers(s, tol);
+        let checks = s["checks"].as_array().unwrap();
+        assert_eq!(
+            checks.len(),
+            6 + s["albedo"].as_array().unwrap().len(),
+            "{side}: checks"
+        );
+        for c in checks {
+            let name = c["name"].as_str().unwrap();
+            assert_eq!(
+                c["pass"].as_bool().unwrap(),
+                !failed.iter().any(|n| n == name),
+                "{side}: check `{name}` = {} says {}, the numbers say otherwise",
+                c["value"],
+                c["pass"]
+            );
         }
-        assert_eq!(m[side]["cov_ratio"].as_array().unwrap().len(), 2);
+        for (name, key) in [
+            ("NDF relative L1", "ndf_l1"),
+            ("NDF correlation", "ndf_corr"),
+            ("NDF Jensen–Shannon (bits)", "ndf_js"),
+            ("peak direction offset (°)", "peak_offset_deg"),
+        ] {
+            let c = checks
+                .iter()
+                .find(|c| c["name"] == name)
+                .unwrap_or_else(|| panic!("{side}: no `{name}`"));
+            assert_eq!(c["value"], s[key], "{side}: `{name}`");
+        }
+        assert_eq!(
+            s["pass"].as_bool().unwrap(),
+            pass,
+            "{side}: pass, with failures {failed:?}"
+        );
     }
-    assert!(m["pass"].is_boolean());
-    assert!(
-        m.get("diffraction").is_some(),
-        "the diffraction check is recorded (null when there is none)"
+    // The verdict is the milled surface's, and the summary, the notes and the report say the same.
+    let (pass, failed) = verdict_from_numbers(&m["milled"], tol);
+    println!(
+        "verdict from the numbers: {}",
+        if pass {
+            "pass".to_string()
+        } else {
+            format!("falls short on {failed:?}")
+        }
     );
-    // the design tile against its target: only the facet discretisation separates them
-    let d = &m["design"];
-    assert!(
-        d["ndf_corr"].as_f64().unwrap() >= 0.99 && d["ndf_l1"].as_f64().unwrap() <= 0.1,
-        "{d}"
-    );
-    // the milled surface: the issue's correlation target is reached; the verdict and the notes agree
-    let ml = &m["milled"];
-    assert!(ml["ndf_corr"].as_f64().unwrap() >= 0.95, "{ml}");
-    let all_pass = ml["checks"]
+    assert_eq!(m["pass"].as_bool().unwrap(), pass, "metrics.json verdict");
+    let verdict = stdout
+        .lines()
+        .find(|l| l.starts_with("verdict"))
+        .expect("a verdict line");
+    assert_eq!(verdict.contains("PASS"), pass, "{verdict}");
+    assert_eq!(verdict.contains("FALLS SHORT"), !pass, "{verdict}");
+    // the exit code says the same: 0 for a pass, 3 for a completed run that falls short
+    assert_eq!(o.status.code(), Some(if pass { 0 } else { 3 }), "exit code");
+    // and the run's folder says it is complete
+    let state = json(&p("run.json"));
+    assert_eq!(state["state"], "complete", "{state}");
+    let html = std::fs::read_to_string(p("report.html")).unwrap();
+    let notes: Vec<&str> = m["notes"]
         .as_array()
         .unwrap()
         .iter()
-        .all(|c| c["pass"].as_bool().unwrap());
-    assert_eq!(m["pass"].as_bool().unwrap(), all_pass);
-    let html = std::fs::read_to_string(out.path().join("report.html")).unwrap();
-    if !all_pass {
+        .map(|n| n.as_str().unwrap())
+        .collect();
+    if pass {
+        assert!(html.contains("meets every tolerance"), "the report's verdict");
+    } else {
         assert!(
-            !m["notes"].as_array().unwrap().is_empty() && html.contains("<h2>Why</h2>"),
+            !notes.is_empty() && html.contains("<h2>Why</h2>"),
             "a shortfall is explained"
         );
+        for name in &failed {
+            assert!(
+                html.contains(name.as_str()),
+                "the report names the failed check `{name}`"
+            );
+        }
     }
-    // one page, offline: images embedded, nothing fetched
-    assert!(html.matches("src=\"data:image/png;base64,").count() >= 7);
-    assert!(!html.contains("http://") && !html.contains("https://") && !html.contains("<script"));
-    // rendered by a real browser: its images show
-    if let Some(chrome) = chromium() {
-        let shot = out.path().join("shot.png");
-        let profile = tempfile::tempdir().unwrap();
-        let r = Command::new(chrome)
-            .args([
-                "--headless",
-                "--no-sandbox",
-                "--disable-gpu",
-                "--disable-quic",
-                "--no-first-run",
-                "--disable-background-networking",
-                "--disable-component-update",
-                "--disable-sync",
-                "--hide-scrollbars",
-                "--window-size=1280,3000",
-            ])
-            .arg(format!("--user-data-dir={}", profile.path().display()))
-            .arg(format!("--screenshot={}", shot.display()))
-            .arg(format!("file://{}", out.path().join("report.html").display()))
-            .output()
-            .unwrap();
-        assert!(shot.exists(), "no screenshot: {}", String::from_utf8_lossy(&r.stderr));
-        let n = image_pixels(&std::fs::read(&shot).unwrap());
-        assert!(
-            n > 5_000,
-            "the rendered page shows only {n} image pixels: images did not render"
+    // A variance ratio or correlation outside its band has its note (`job::explain`).
+    for (k, axis) in ["x", "y"].iter().enumerate() {
+        let c = f(&m["milled"]["cov_ratio"][k]);
+        let noted = notes
+            .iter()
+            .any(|n| n.starts_with(&format!("Slope variance along {axis} is")));
+        assert_eq!(
+            noted,
+            !(f(&tol["cov_ratio"][0])..=f(&tol["cov_ratio"][1])).contains(&c),
+            "{axis}: {notes:?}"
         );
     }
+    let corr_short = f(&m["milled"]["ndf_corr"]) < f(&tol["ndf_corr_min"]);
+    assert_eq!(
+        notes.iter().any(|n| n.starts_with("Milled NDF correlation")),
+        corr_short,
+        "{notes:?}"
+    );
+    // The diffraction check: a raster of period d shows resolved orders only when d < πσ/√2 for the
+    // coherence σ = 10 µm (orders λ/d apart in sin θ against the window's spectral std λ/(2√2·πσ), resolved
+    // at 4 stds) and the first order λ/d falls inside the lobe. The default job's d = 44.7 µm is above
+    // 22.2 µm, so no warning; a smaller stepover would need one.
+    let d_um = stepover * 1e3;
+    let resolved = d_um < std::f64::consts::PI * 10.0 / 2f64.sqrt();
+    assert_eq!(
+        m["diffraction"].is_string(),
+        resolved && {
+            let o = &json(&p("ndf.json"))["observed_stats"]["cov"];
+            let o_std = f(&o[0][0]).max(f(&o[1][1])).sqrt();
+            0.55 / d_um < (2.0 * o_std).atan().sin()
+        },
+        "diffraction {}",
+        m["diffraction"]
+    );
+    // The closing summary names the report it wrote.
+    assert!(
+        stdout
+            .lines()
+            .any(|l| l.starts_with("report") && l.trim_end().ends_with(&p("report.html").display().to_string())),
+        "closing summary names the report"
+    );
+    // The design tile against its target: only the facet discretisation separates them.
+    let d = &m["design"];
+    assert!(f(&d["ndf_corr"]) >= 0.99 && f(&d["ndf_l1"]) <= 0.1, "{d}");
+    // The milled surface reaches the issue's correlation target.
+    assert!(f(&m["milled"]["ndf_corr"]) >= 0.95, "{}", m["milled"]);
+    // One page, offline: images embedded, nothing fetched.
+    assert!(html.matches("src=\"data:image/png;base64,").count() >= 7);
+    assert!(!html.contains("http://") && !html.contains("https://") && !html.contains("<script"));
+}
+
+/// The report rendered by a real browser: its images show.
+#[test]
+#[ignore = "needs chromium"]
+fn default_job_report_renders_in_chromium() {
+    let chrome = chromium();
+    let out = tempfile::tempdir().unwrap();
+    run_default_job(out.path());
+    let shot = out.path().join("shot.png");
+    let profile = tempfile::tempdir().unwrap();
+    let r = Command::new(chrome)
+        .args([
+            "--headless",
+            "--no-sandbox",
+            "--disable-gpu",
+            "--disable-quic",
+            "--no-first-run",
+            "--disable-background-networking",
+            "--disable-component-update",
+            "--disable-sync",
+            "--hide-scrollbars",
+            "--window-size=1280,3000",
+        ])
+        .arg(format!("--user-data-dir={}", profile.path().display()))
+        .arg(format!("--screenshot={}", shot.display()))
+        .arg(format!("file://{}", out.path().join("report.html").display()))
+        .output()
+        .unwrap();
+    assert!(shot.exists(), "no screenshot: {}", String::from_utf8_lossy(&r.stderr));
+    let n = image_pixels(&std::fs::read(&shot).unwrap());
+    println!("{n} image pixels in the screenshot");
+    assert!(
+        n > 5_000,
+        "the rendered page shows only {n} image pixels: images did not render"
+    );
 }
 
 fn write_job(dir: &Path, text: &str) -> PathBuf {

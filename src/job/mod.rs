@@ -255,12 +255,16 @@ fn apply_override(raw: &mut toml::Value, o: &str) -> Result<(), String> {
         .unwrap_or_else(|| toml::Value::String(value.to_string()));
     let mut node = raw;
     for part in &path[..path.len() - 1] {
-        let table = node.as_table_mut().ok_or_else(|| format!("`{part}` is not a section"))?;
+        let table = node
+            .as_table_mut()
+            .ok_or_else(|| format!("`{part}` is not a section"))?;
         node = table
             .entry(part.to_string())
             .or_insert_with(|| toml::Value::Table(toml::Table::new()));
     }
-    let table = node.as_table_mut().ok_or_else(|| format!("`{key}` is not inside a section"))?;
+    let table = node
+        .as_table_mut()
+        .ok_or_else(|| format!("`{key}` is not inside a section"))?;
     table.insert(path[path.len() - 1].to_string(), parsed);
     Ok(())
 }

@@ -40,9 +40,15 @@ impl Stage {
 
     /// The stage of a name (`ndf`, `facets`, `toolpath`, `simulate`, `verify`).
     pub fn parse(s: &str) -> Option<Stage> {
-        [Stage::Ndf, Stage::Facets, Stage::Toolpath, Stage::Simulate, Stage::Verify]
-            .into_iter()
-            .find(|st| st.name() == s)
+        [
+            Stage::Ndf,
+            Stage::Facets,
+            Stage::Toolpath,
+            Stage::Simulate,
+            Stage::Verify,
+        ]
+        .into_iter()
+        .find(|st| st.name() == s)
     }
 }
 
@@ -157,7 +163,12 @@ pub fn run(
     let finish = |o: Out, timings: Vec<(Stage, f64)>, mut outcome: Outcome| -> Result<Outcome, JobError> {
         let mut o = o;
         write_state(&mut o, &name, &timings, "complete")?;
-        outcome.bytes_written = o.written.iter().filter_map(|p| std::fs::metadata(p).ok()).map(|m| m.len()).sum();
+        outcome.bytes_written = o
+            .written
+            .iter()
+            .filter_map(|p| std::fs::metadata(p).ok())
+            .map(|m| m.len())
+            .sum();
         outcome.artifacts = o.written;
         outcome.timings = timings;
         Ok(outcome)
