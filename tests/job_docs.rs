@@ -48,12 +48,3 @@ fn every_job_key_is_documented_and_every_documented_key_exists() {
         "rows in docs/JOB.md for keys the format does not have: {unknown:?}"
     );
 }
-
-#[test]
-fn print_defaults() {
-    use brdfmill::*;
-    println!("{}", toml::to_string(&ndf::NdfConfig::default()).unwrap());
-    println!("{}", toml::to_string(&facets::FacetsConfig::default()).unwrap());
-    println!("{}", toml::to_string(&toolpath::ToolpathConfig::default()).unwrap());
-    println!("{}", toml::to_string(&job::SimulateSection::default()).unwrap());
-}
