@@ -195,8 +195,8 @@ impl Job {
         if let Some(p) = &job.target.polish {
             Brdf::parse(&resolve_spec(p, &dir)).map_err(|e| invalid(format!("`target.polish`: {e}")))?;
         }
-        let machine_path = dir.join(&job.machine.profile);
-        let machine = Machine::load(&machine_path).map_err(|e| invalid(format!("`machine.profile`: {e}")))?;
+        let (machine_path, machine) =
+            load_profile(&job.machine.profile, &dir).map_err(|e| invalid(format!("`machine.profile`: {e}")))?;
         let tool = machine
             .tool(&job.toolpath.tool)
             .map_err(|e| invalid(format!("`toolpath.tool`: {e}")))?;
@@ -238,6 +238,33 @@ impl Job {
             machine,
             machine_path,
         })
+    }
+}
+
+/// The machine profiles shipped in `machines/`, by name.
+pub const SHIPPED_PROFILES: [(&str, &str); 3] = [
+    ("grbl-3018", include_str!("../../machines/grbl-3018.toml")),
+    ("grbl-router-6040", include_str!("../../machines/grbl-router-6040.toml")),
+    ("linuxcnc-mill", include_str!("../../machines/linuxcnc-mill.toml")),
+];
+
+/// A machine profile by path (relative to the job's folder) or, when no such file exists, by the name of a
+/// shipped profile (`grbl-3018`, `grbl-router-6040`, `linuxcnc-mill`).
+fn load_profile(profile: &str, dir: &Path) -> Result<(PathBuf, Machine), String> {
+    let path = dir.join(profile);
+    if path.exists() {
+        return Machine::load(&path).map(|m| (path, m)).map_err(|e| e.to_string());
+    }
+    let name = profile.trim_end_matches(".toml");
+    match SHIPPED_PROFILES.iter().find(|(n, _)| *n == name) {
+        Some((n, text)) => Machine::parse(text)
+            .map(|m| (PathBuf::from(format!("machines/{n}.toml (shipped)")), m))
+            .map_err(|e| e.to_string()),
+        None => Err(format!(
+            "{}: no such file, and not a shipped profile ({})",
+            path.display(),
+            SHIPPED_PROFILES.map(|(n, _)| n).join(", ")
+        )),
     }
 }
 
@@ -349,3 +376,23 @@ mod run;
 mod summary;
 
 pub use run::{run, Outcome, Stage};
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_profiles_are_found_by_name_and_a_wrong_name_lists_them() {
+        let dir = tempfile::tempdir().unwrap();
+        let (p, m) = load_profile("grbl-3018", dir.path()).unwrap();
+        assert!(p.display().to_string().contains("shipped"));
+        let on_disk = Machine::load(Path::new(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/machines/grbl-3018.toml"
+        )))
+        .unwrap();
+        assert_eq!(m, on_disk);
+        let e = load_profile("grbl-9999", dir.path()).unwrap_err();
+        assert!(e.contains("grbl-router-6040") && e.contains("linuxcnc-mill"), "{e}");
+    }
+}
