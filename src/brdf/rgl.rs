@@ -291,7 +291,7 @@ impl RglBsdf {
             if axis.iter().any(|v| !(v.is_finite() && (-1e-6..=hi + 1e-6).contains(v))) {
                 return Err(format!("`{name}` must hold angles in [0, {hi:.6}] rad, got {axis:?}"));
             }
-            if axis.windows(2).any(|w| !(w[1] > w[0])) {
+            if axis.windows(2).any(|w| w[1] <= w[0]) {
                 return Err(format!("`{name}` must be strictly increasing, got {axis:?}"));
             }
         }
