@@ -165,7 +165,7 @@ fn load(path: &Path, cfg: &Config) -> Result<Loaded, AnalyzeError> {
         "x3p" => {
             let s = crate::x3p::read(path)?;
             let missing = s.invalid_count();
-            let hf = s.heightfield().map_err(input)?;
+            let hf = s.heightfield().map_err(|e| input(e.to_string()))?;
             Ok((hf, s.valid, missing, s.warnings))
         }
         "npy" => {
@@ -179,7 +179,12 @@ fn load(path: &Path, cfg: &Config) -> Result<Loaded, AnalyzeError> {
             let valid: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
             let missing = valid.iter().filter(|v| !**v).count();
             let x = crate::x3p::X3p::from_grid(nx, ny, pitch * 1e-3, z, valid.clone());
-            Ok((x.heightfield().map_err(input)?, valid, missing, Vec::new()))
+            Ok((
+                x.heightfield().map_err(|e| input(e.to_string()))?,
+                valid,
+                missing,
+                Vec::new(),
+            ))
         }
         _ => Err(input("expected a .x3p or .npy file".into())),
     }

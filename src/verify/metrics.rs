@@ -46,13 +46,29 @@ impl Default for Tolerances {
     }
 }
 
+/// A tolerance that is not a bound: the field, what it must be, what it is.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("`{field}` must be {expected}, got {value}")]
+pub struct ToleranceError {
+    /// The field of `[verify.tolerances]`.
+    pub field: &'static str,
+    /// What it must be.
+    pub expected: &'static str,
+    /// What it is.
+    pub value: String,
+}
+
 impl Tolerances {
     /// Check that every bound is a number and the band is ordered; the error names the field.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), ToleranceError> {
+        let bad =
+            |field: &'static str, expected: &'static str, value: String| ToleranceError { field, expected, value };
         let [lo, hi] = self.cov_ratio;
         if !(lo.is_finite() && hi.is_finite() && 0.0 < lo && lo <= hi) {
-            return Err(format!(
-                "`cov_ratio` must be [low, high] with 0 < low ≤ high, got [{lo}, {hi}]"
+            return Err(bad(
+                "cov_ratio",
+                "[low, high] with 0 < low ≤ high",
+                format!("[{lo}, {hi}]"),
             ));
         }
         for (field, v) in [
@@ -63,11 +79,11 @@ impl Tolerances {
             ("albedo_rel_max", self.albedo_rel_max),
         ] {
             if !(v.is_finite() && v >= 0.0) {
-                return Err(format!("`{field}` must be a number ≥ 0, got {v}"));
+                return Err(bad(field, "a number ≥ 0", v.to_string()));
             }
         }
         if self.ndf_corr_min > 1.0 {
-            return Err(format!("`ndf_corr_min` must be at most 1, got {}", self.ndf_corr_min));
+            return Err(bad("ndf_corr_min", "at most 1", self.ndf_corr_min.to_string()));
         }
         Ok(())
     }

@@ -68,9 +68,9 @@ impl VerifyConfig {
                 return bad(field, format!("must be in [{lo}, {hi}], got {v}"));
             }
         }
-        self.tolerances.validate().map_err(|message| VerifyError::Config {
+        self.tolerances.validate().map_err(|e| VerifyError::Config {
             field: "tolerances",
-            message,
+            message: e.to_string(),
         })
     }
 }

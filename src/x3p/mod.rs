@@ -107,6 +107,17 @@ pub enum X3pError {
     /// The output could not be written.
     #[error(transparent)]
     Write(#[from] crate::io::WriteError),
+    /// The surface read cannot be a heightfield.
+    #[error("{0}")]
+    Surface(&'static str),
+    /// The x and y spacings differ (a heightfield has one pitch).
+    #[error("x and y spacing differ ({x_mm} and {y_mm} mm)")]
+    Anisotropic {
+        /// x spacing, mm.
+        x_mm: f64,
+        /// y spacing, mm.
+        y_mm: f64,
+    },
 }
 
 /// A surface read from an X3P file.
@@ -167,15 +178,15 @@ impl X3p {
     /// The surface as a heightfield (mm, not periodic), invalid points filled by iterated averaging of
     /// their valid (or already filled) 8-neighbours, innermost first. Errors when no point is valid or the
     /// spacing differs between x and y (brdfmill's heightfields have one pitch).
-    pub fn heightfield(&self) -> Result<Heightfield, String> {
+    pub fn heightfield(&self) -> Result<Heightfield, X3pError> {
         if !self.valid.iter().any(|v| *v) {
-            return Err("the surface has no valid point".into());
+            return Err(X3pError::Surface("the surface has no valid point"));
         }
         if (self.pitch_x_mm - self.pitch_y_mm).abs() > 1e-9 * self.pitch_x_mm {
-            return Err(format!(
-                "x and y spacing differ ({} and {} mm)",
-                self.pitch_x_mm, self.pitch_y_mm
-            ));
+            return Err(X3pError::Anisotropic {
+                x_mm: self.pitch_x_mm,
+                y_mm: self.pitch_y_mm,
+            });
         }
         let (nx, ny) = (self.nx, self.ny);
         let mut z = self.z_mm.clone();
