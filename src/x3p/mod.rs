@@ -44,14 +44,8 @@ const MAX_XML_BYTES: u64 = 64 << 20;
 #[derive(Debug, thiserror::Error)]
 pub enum X3pError {
     /// The file could not be opened or read.
-    #[error("cannot read {path}")]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// The cause.
-        #[source]
-        source: std::io::Error,
-    },
+    #[error(transparent)]
+    Io(#[from] crate::io::ReadError),
     /// The zip container is unreadable.
     #[error("{path} is not a readable zip archive: {message}")]
     Zip {
@@ -346,7 +340,7 @@ struct Archive<'p> {
 impl<'p> Archive<'p> {
     /// Open the zip and find `main.xml`: the shortest path ending in it, macOS resource forks ignored.
     fn open(path: &'p Path) -> Result<Self, X3pError> {
-        let file = std::fs::File::open(path).map_err(|source| X3pError::Io {
+        let file = std::fs::File::open(path).map_err(|source| crate::io::ReadError {
             path: path.to_path_buf(),
             source,
         })?;
@@ -389,10 +383,12 @@ impl<'p> Archive<'p> {
             return Err(too_big(declared));
         }
         let mut v = Vec::with_capacity(declared as usize);
-        f.take(max + 1).read_to_end(&mut v).map_err(|source| X3pError::Io {
-            path: self.path.to_path_buf(),
-            source,
-        })?;
+        f.take(max + 1)
+            .read_to_end(&mut v)
+            .map_err(|source| crate::io::ReadError {
+                path: self.path.to_path_buf(),
+                source,
+            })?;
         if v.len() as u64 > max {
             return Err(too_big(v.len() as u64));
         }
