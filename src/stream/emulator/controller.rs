@@ -205,7 +205,10 @@ impl Controller {
             Some(b) if self.state == State::Run => self.block_speed_mm_s(b),
             _ => 0.0,
         };
-        let a = (120..=122).map(|k| self.setting(k)).fold(f64::INFINITY, f64::min).max(1e-6);
+        let a = (120..=122)
+            .map(|k| self.setting(k))
+            .fold(f64::INFINITY, f64::min)
+            .max(1e-6);
         self.decel_total_s = v / a;
         self.decel_left_s = self.decel_total_s;
     }

@@ -30,7 +30,11 @@ fn answers_like_grbl() {
     assert_eq!(send(&mut c, "G5X1\n"), "error:20\r\n");
     assert_eq!(send(&mut c, "G1G0X1\n"), "error:24\r\n", "two axis commands");
     assert_eq!(send(&mut c, "G0G80X1\n"), "error:21\r\n");
-    assert_eq!(send(&mut c, "G91.1G1X1\n"), "error:22\r\n", "G91.1 accepted, then no feed");
+    assert_eq!(
+        send(&mut c, "G91.1G1X1\n"),
+        "error:22\r\n",
+        "G91.1 accepted, then no feed"
+    );
     assert_eq!(send(&mut c, "G90.1\n"), "error:20\r\n");
     assert_eq!(send(&mut c, "M7\n"), "error:20\r\n", "no ENABLE_M7 on a default build");
     assert_eq!(send(&mut c, "$Z\n"), "error:2\r\n");
@@ -47,12 +51,18 @@ fn a_default_controller_is_a_stock_build() {
     let mut c = Controller::new(&EmulatorConfig::default());
     c.take_output();
     let i = send(&mut c, "$I\n");
-    assert!(i.contains("[VER:1.1h.20190830:]") && i.contains("[OPT:V,15,128]"), "{i}");
+    assert!(
+        i.contains("[VER:1.1h.20190830:]") && i.contains("[OPT:V,15,128]"),
+        "{i}"
+    );
     assert!(send(&mut c, "$$\n").contains("$10=1\r\n"));
     assert_eq!(send(&mut c, "N5G1X10F300\n"), "ok\r\n");
     c.advance(0.5);
     let s = send(&mut c, "?");
-    assert!(s.starts_with("<Run|MPos:2.500,0.000,0.000|FS:300,0"), "no Bf, no Ln: {s}");
+    assert!(
+        s.starts_with("<Run|MPos:2.500,0.000,0.000|FS:300,0"),
+        "no Bf, no Ln: {s}"
+    );
 }
 
 #[test]
@@ -99,7 +109,10 @@ fn status_reports_planner_and_line() {
     );
     send(&mut c, "!");
     c.advance(10.0);
-    assert!(send(&mut c, "?").starts_with("<Hold:0|MPos:30.050"), "0.05 mm to stop from 1 mm/s");
+    assert!(
+        send(&mut c, "?").starts_with("<Hold:0|MPos:30.050"),
+        "0.05 mm to stop from 1 mm/s"
+    );
     send(&mut c, "~");
     c.advance(31.0);
     assert!(send(&mut c, "?").starts_with("<Idle|MPos:60.000,0.000,0.000|Bf:15,128|FS:0,0"));

@@ -10,9 +10,9 @@ use super::locate::known;
 use super::{
     locate, record_located, start_record, Config, Evidence, Outcome, Outgoing, Session, Stats, StreamError, Tag,
 };
-use crate::stream::protocol::MachineState;
 use crate::stream::journal::{Journal, JournalState, Record};
 use crate::stream::program::{Distance, Line, Modal, MotionMode, Program, Spindle, Units};
+use crate::stream::protocol::MachineState;
 
 /// Load the journal and check that this run can resume it.
 pub(super) fn load_state(program: &Program, cfg: &Config, journal_path: &Path) -> Result<JournalState, StreamError> {
@@ -72,10 +72,11 @@ impl Session<'_> {
             journal: journal_path.to_path_buf(),
             what,
         })?;
-        let (first, queue) = plan_resume(program, &st, self.cfg, travel.as_ref()).map_err(|what| StreamError::Resume {
-            journal: journal_path.to_path_buf(),
-            what,
-        })?;
+        let (first, queue) =
+            plan_resume(program, &st, self.cfg, travel.as_ref()).map_err(|what| StreamError::Resume {
+                journal: journal_path.to_path_buf(),
+                what,
+            })?;
         self.executed = st.executed.clone();
         let here = self.status.as_ref().and_then(|s| self.work_position(s));
         j.record_synced(&start_record(program, self.cfg, first, here))?;
@@ -117,11 +118,11 @@ impl Session<'_> {
             // end of a block.
             at_rest: status.state == Some(MachineState::Idle) && status.line.is_none(),
         };
-        let loc = locate(program, &candidates, &ev, self.cfg.position_tolerance_mm)
-        .map_err(|what| StreamError::Resume {
-            journal: journal_path.to_path_buf(),
-            what: format!("cannot tell which lines ran before the link dropped: {what}"),
-        })?;
+        let loc =
+            locate(program, &candidates, &ev, self.cfg.position_tolerance_mm).map_err(|what| StreamError::Resume {
+                journal: journal_path.to_path_buf(),
+                what: format!("cannot tell which lines ran before the link dropped: {what}"),
+            })?;
         if let Some(why) = &loc.ambiguous {
             self.observer.note(why);
         }
@@ -171,9 +172,11 @@ impl Session<'_> {
             std::thread::sleep(self.cfg.status_interval.max(std::time::Duration::from_millis(200)));
         }
         if !self.wco_seen {
-            return Err("the controller reported no work offset (WCO), so the approach cannot be checked \
+            return Err(
+                "the controller reported no work offset (WCO), so the approach cannot be checked \
                         against the machine's travel"
-                .into());
+                    .into(),
+            );
         }
         Ok(Some(Travel {
             max_mm: [x, y, z],

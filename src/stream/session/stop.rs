@@ -114,7 +114,10 @@ impl Session<'_> {
             *message += "; the controller reported no position";
             return Ok(false);
         };
-        let moved = self.executed.iter().any(|&n| self.program.line(n).is_some_and(|l| l.moves));
+        let moved = self
+            .executed
+            .iter()
+            .any(|&n| self.program.line(n).is_some_and(|l| l.moves));
         let ev = Evidence {
             ln,
             position: p,
@@ -153,11 +156,12 @@ impl Session<'_> {
         let alarm = matches!(fault, Fault::Alarm(_));
         let mut notes: Vec<String> = Vec::new();
         let mut stopped = None;
-        if alarm {
-            // GRBL locks up on a critical alarm and serves nothing but the reset: do not poll.
-        } else if let Err(e) = self.write(&[Realtime::FeedHold.byte()]) {
-            return (None, None, Some(format!("feed hold not sent: {e:?}")));
-        } else {
+        // At an alarm motion has stopped, and a critical one makes GRBL serve nothing but the reset: no
+        // hold, no polling.
+        if !alarm {
+            if let Err(e) = self.write(&[Realtime::FeedHold.byte()]) {
+                return (None, None, Some(format!("feed hold not sent: {e:?}")));
+            }
             match self.wait_stopped() {
                 Ok(Some(st)) => stopped = Some(st),
                 Ok(None) => notes.push("second Ctrl-C: reset at once, while the machine may still move".into()),
@@ -283,12 +287,18 @@ impl Session<'_> {
 /// What to check after an alarm, for the user.
 fn alarm_advice(code: u16) -> &'static str {
     match code {
-        1 => "; a limit switch tripped and the position is lost: check the switch and free the axis, then home \
-              ($H) before resuming with --unlock",
-        2 => "; a move would leave the machine's travel ($130-$132 from the homed origin): check the work \
-              offset (G54/WCO) and the program's extent; the position is kept",
-        3 => "; the controller was reset while moving and the position may be lost: home ($H) before resuming \
-              with --unlock",
+        1 => {
+            "; a limit switch tripped and the position is lost: check the switch and free the axis, then home \
+              ($H) before resuming with --unlock"
+        }
+        2 => {
+            "; a move would leave the machine's travel ($130-$132 from the homed origin): check the work \
+              offset (G54/WCO) and the program's extent; the position is kept"
+        }
+        3 => {
+            "; the controller was reset while moving and the position may be lost: home ($H) before resuming \
+              with --unlock"
+        }
         _ => "",
     }
 }
