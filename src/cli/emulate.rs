@@ -17,7 +17,8 @@ pub struct Args {
     /// Run simulated motion this many times faster than real time.
     #[arg(long, default_value_t = 1.0)]
     pub time_scale: f64,
-    /// Inject a fault: LINE:error[:CODE], LINE:alarm[:CODE] or LINE:disconnect (LINE = the N line number).
+    /// Inject a fault: LINE:error[:CODE], LINE:alarm[:CODE], LINE:disconnect or LINE:silence[:MS]
+    /// (LINE = the N line number; a silence holds every answer back for MS simulated milliseconds).
     #[arg(long = "fail-at")]
     pub fail_at: Vec<Fault>,
     /// Change a setting at power-up, N=VALUE (e.g. 10=3 to report Bf); repeatable.
@@ -26,6 +27,13 @@ pub struct Args {
     /// Keep a symbolic link at this path pointing to the current port (it changes after a disconnect).
     #[arg(long)]
     pub link: Option<PathBuf>,
+    /// Emulate a build with line numbers (`USE_LINE_NUMBERS`: `N` in `[OPT:]`, `Ln:` in status reports).
+    /// The default is a stock 1.1h build, `[OPT:V,15,128]`.
+    #[arg(long)]
+    pub line_numbers: bool,
+    /// Emulate a build with `ENABLE_M7` (a stock build answers `M7` with error:20).
+    #[arg(long)]
+    pub enable_m7: bool,
 }
 
 /// Run the subcommand.
@@ -48,6 +56,8 @@ pub fn run(a: &Args) -> Result<()> {
         settings,
         faults: a.fail_at.clone(),
         link_path: a.link.clone(),
+        line_numbers: a.line_numbers,
+        enable_m7: a.enable_m7,
         ..EmulatorConfig::default()
     })
     .context("cannot open a pseudo-terminal")?;

@@ -96,7 +96,16 @@ pub fn run(a: &Args) -> Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     {
         let stop = Arc::clone(&stop);
-        ctrlc::set_handler(move || stop.store(true, Ordering::SeqCst)).context("cannot install the Ctrl-C handler")?;
+        // The streamer takes the flag when it acts on it: a first Ctrl-C holds and then resets, a second one
+        // while it waits for the hold resets at once.
+        let presses = std::sync::atomic::AtomicUsize::new(0);
+        ctrlc::set_handler(move || {
+            stop.store(true, Ordering::SeqCst);
+            if presses.fetch_add(1, Ordering::SeqCst) == 0 {
+                eprintln!("\nCtrl-C: feed hold, then reset once motion has stopped (Ctrl-C again: reset at once)");
+            }
+        })
+        .context("cannot install the Ctrl-C handler")?;
     }
     let bar = indicatif::ProgressBar::new(program.sendable().count() as u64);
     bar.set_style(
@@ -119,6 +128,9 @@ pub fn run(a: &Args) -> Result<()> {
                 s.bytes_sent as f64 / secs,
                 journal.display()
             );
+            if let Some(m) = s.end_detection {
+                println!("end of the job read from: {m}");
+            }
             Ok(())
         }
         Outcome::Stopped(r, _) => {

@@ -122,6 +122,22 @@ pub struct Line {
 }
 
 impl Line {
+    /// GRBL answers this line only once the planner has emptied (`protocol_buffer_synchronize`): a dwell,
+    /// a program stop or end, a spindle state change or a speed change while it runs, a coolant change.
+    /// Its `ok`, received before any reset, therefore proves that every line planned before it executed.
+    #[must_use]
+    pub fn synchronises(&self) -> bool {
+        let (b, a) = (&self.before, &self.after);
+        let spindle = b.spindle != a.spindle || (a.spindle != Spindle::Off && b.spindle_rpm != a.spindle_rpm);
+        let coolant = b.mist != a.mist || b.flood != a.flood;
+        let word = words(&self.block).is_ok_and(|ws| {
+            ws.iter().any(|w| {
+                (w.letter == 'G' && w.value == 4.0) || (w.letter == 'M' && matches!(w.value as i64, 0 | 1 | 2 | 30))
+            })
+        });
+        self.kind == LineKind::Gcode && (spindle || coolant || word)
+    }
+
     /// The text sent for this line: the cleaned block, prefixed with `N<number>` when `numbered`.
     #[must_use]
     pub fn wire_text(&self, numbered: bool) -> String {

@@ -42,6 +42,10 @@ pub enum Record {
         numbered: bool,
         /// First program line of this run (1 for a fresh run).
         from_line: usize,
+        /// Work position (mm) when the run started, as the controller reported it: where the tool is
+        /// before the first line of a fresh run, which the program model cannot know.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        position_mm: Option<[f64; 3]>,
     },
     /// The line may have been sent (written before the bytes go out).
     Sent {
@@ -74,6 +78,12 @@ pub enum Record {
         line: usize,
         /// Where the tool stopped on it, mm.
         at_mm: [f64; 3],
+    },
+    /// The stop position lay on the path more than once: the `executed`/`partial` records that follow are
+    /// the earliest consistent explanation, and this says why.
+    Ambiguous {
+        /// What was ambiguous.
+        message: String,
     },
     /// The run stopped before the end.
     Stop {
@@ -147,6 +157,8 @@ pub struct JournalState {
     pub complete: bool,
     /// Number of runs (start records).
     pub runs: usize,
+    /// Work position before the first run's first line (from its start record), if reported.
+    pub origin: Option<[f64; 3]>,
 }
 
 /// An open journal, appending.
@@ -277,6 +289,7 @@ impl Replay {
                 fingerprint,
                 lines,
                 numbered,
+                position_mm,
                 ..
             } => {
                 if *version != VERSION {
@@ -288,6 +301,9 @@ impl Replay {
                 st.fingerprint = *fingerprint;
                 st.lines = *lines;
                 st.numbered = *numbered;
+                if st.runs == 0 {
+                    st.origin = *position_mm;
+                }
                 st.runs += 1;
                 st.stop = None;
                 // A new connection: whatever was in flight before was either flushed or drained.
@@ -327,6 +343,7 @@ impl Replay {
                 self.in_flight.clear();
             }
             Record::Complete => st.complete = true,
+            Record::Ambiguous { .. } => {}
         }
         Ok(())
     }
@@ -362,6 +379,7 @@ mod tests {
             lines,
             numbered: true,
             from_line: 1,
+            position_mm: None,
         }
     }
 

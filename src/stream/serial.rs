@@ -77,9 +77,16 @@ impl SerialLink {
 }
 
 impl Link for SerialLink {
+    /// Write everything and drain it to the wire; an interrupted system call (EINTR, e.g. Ctrl-C) is
+    /// retried, never reported as a failure.
     fn write_all(&mut self, bytes: &[u8]) -> std::io::Result<()> {
-        Write::write_all(&mut self.port, bytes)?;
-        Write::flush(&mut self.port)
+        Write::write_all(&mut self.port, bytes)?; // retries EINTR itself
+        loop {
+            match Write::flush(&mut self.port) {
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                other => return other,
+            }
+        }
     }
 
     fn read(&mut self, buf: &mut [u8], timeout: Duration) -> std::io::Result<usize> {
@@ -93,6 +100,8 @@ impl Link for SerialLink {
             Ok(0) => Err(std::io::Error::new(std::io::ErrorKind::BrokenPipe, "port closed")),
             Ok(n) => Ok(n),
             Err(e) if e.kind() == std::io::ErrorKind::TimedOut => Ok(0),
+            // A signal (Ctrl-C) interrupted the wait: nothing was read, the link is fine.
+            Err(e) if e.kind() == std::io::ErrorKind::Interrupted => Ok(0),
             Err(e) => Err(e),
         }
     }

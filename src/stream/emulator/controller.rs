@@ -27,11 +27,19 @@ pub(super) enum State {
 #[derive(Debug)]
 pub struct Controller {
     pub(super) line_numbers: bool,
+    pub(super) enable_m7: bool,
     pub(super) settings: BTreeMap<u16, f64>,
     pub(super) state: State,
     /// Waiting for a soft reset after a critical alarm.
     pub(super) critical: bool,
+    /// A feed hold is in force (`Hold:1` while decelerating, `Hold:0` once stopped).
     pub(super) hold: bool,
+    /// Simulated seconds of deceleration left in the current feed hold (0: the hold is complete).
+    pub(super) decel_left_s: f64,
+    /// The whole deceleration of the current hold, s (its speed falls linearly over this time).
+    pub(super) decel_total_s: f64,
+    /// Output is held back (not lost) until this simulated time: an injected silence.
+    pub(super) mute_until_s: f64,
     pub(super) rx: VecDeque<u8>,
     pub(super) reader: LineReader,
     pub(super) waiting: Option<Waiting>,
@@ -60,10 +68,14 @@ impl Controller {
         }
         let mut c = Controller {
             line_numbers: cfg.line_numbers,
+            enable_m7: cfg.enable_m7,
             settings,
             state: State::Idle,
             critical: false,
             hold: false,
+            decel_left_s: 0.0,
+            decel_total_s: 0.0,
+            mute_until_s: 0.0,
             rx: VecDeque::with_capacity(RX_BUFFER_BYTES),
             reader: LineReader::new(),
             waiting: None,
@@ -107,8 +119,12 @@ impl Controller {
         }
     }
 
-    /// Bytes to send to the host (drained).
+    /// Bytes to send to the host (drained). During an injected silence nothing is released: the bytes
+    /// wait, as they would in a stalled controller, and go out when the silence ends.
     pub fn take_output(&mut self) -> Vec<u8> {
+        if self.sim_time_s < self.mute_until_s {
+            return Vec::new();
+        }
         std::mem::take(&mut self.out)
     }
 
@@ -144,14 +160,12 @@ impl Controller {
     pub fn receive(&mut self, b: u8) {
         self.log.bytes_in += 1;
         match b {
+            // A controller locked by a critical alarm serves nothing but the reset (`protocol.c`).
+            b'?' if self.critical => {}
             b'?' => self.status_report(),
-            b'!' => {
-                if self.state == State::Run && !self.planner.is_empty() {
-                    self.hold = true;
-                }
-            }
+            b'!' => self.feed_hold(),
             b'~' => {
-                if self.hold {
+                if self.hold && self.decel_left_s <= 0.0 {
                     self.hold = false;
                 }
                 if self.state == State::Idle && !self.planner.is_empty() {
@@ -179,10 +193,37 @@ impl Controller {
         }
     }
 
-    /// Ctrl-X: stop, flush the receive buffer and planner, reset the parser, print the banner. A reset while
-    /// moving or holding raises `ALARM:3` (GRBL's `mc_reset`).
+    /// `!`: a feed hold. Running, the machine decelerates along the planned path at `$120` (the lowest of
+    /// the axes' accelerations, as a conservative stand-in for GRBL's per-block limit) and reports `Hold:1`
+    /// until it stops; idle, the hold is complete at once (`Hold:0`), as in GRBL's `protocol.c`.
+    fn feed_hold(&mut self) {
+        if matches!(self.state, State::Alarm | State::Check) || self.hold {
+            return;
+        }
+        self.hold = true;
+        let v = match self.planner.front() {
+            Some(b) if self.state == State::Run => self.block_speed_mm_s(b),
+            _ => 0.0,
+        };
+        let a = (120..=122)
+            .map(|k| self.setting(k))
+            .fold(f64::INFINITY, f64::min)
+            .max(1e-6);
+        self.decel_total_s = v / a;
+        self.decel_left_s = self.decel_total_s;
+    }
+
+    /// Ctrl-X: stop, flush the receive buffer and planner, reset the parser, print the banner. As GRBL's
+    /// `mc_reset`, the reset raises `ALARM:3` only while motion is executing — a cycle, or a hold still
+    /// decelerating; after a completed hold (`Hold:0`) it raises none and the controller comes back Idle.
+    /// The reset that ends a critical alarm is answered with one stray `ok` before the banner, as the
+    /// 1.1h PC build was seen to do.
     pub(super) fn soft_reset(&mut self) {
-        let moving = (self.state == State::Run || self.hold) && !self.planner.is_empty() && !self.critical;
+        let executing = self.state == State::Run && (!self.hold || self.decel_left_s > 0.0);
+        let moving = executing && !self.planner.is_empty() && !self.critical;
+        if self.critical {
+            self.say("ok");
+        }
         self.flush_motion();
         self.rx.clear();
         self.reader.clear();
@@ -206,6 +247,7 @@ impl Controller {
         // Motion stops here; the planner is only cleared by the reset that ends the lock, so status
         // reports until then still name the block that was executing (`Ln`), as in GRBL.
         self.hold = false;
+        self.decel_left_s = 0.0;
         self.waiting = None;
         self.state = State::Alarm;
         self.critical = true;
@@ -259,6 +301,7 @@ impl Controller {
                 return;
             }
             Some(FaultKind::Disconnect) => disconnect_after = true,
+            Some(FaultKind::Silence(ms)) => self.mute_until_s = self.sim_time_s + f64::from(ms) / 1000.0,
             None => {}
         }
         if text.starts_with('$') {

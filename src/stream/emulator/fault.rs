@@ -32,11 +32,14 @@ pub enum FaultKind {
     Alarm(u16),
     /// Run the line, then drop the link.
     Disconnect,
+    /// Run the line, then send nothing (answers and reports wait) for this many simulated milliseconds.
+    Silence(u32),
 }
 
 impl std::str::FromStr for Fault {
     type Err = String;
-    /// `N:error[:code]`, `N:alarm[:code]`, `N:disconnect` (N a line number `N` word).
+    /// `N:error[:code]`, `N:alarm[:code]`, `N:disconnect`, `N:silence[:ms]` (N a line number `N` word;
+    /// a silence of at most 65535 ms).
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let parts: Vec<&str> = s.split(':').collect();
         let n: u32 = parts
@@ -52,7 +55,8 @@ impl std::str::FromStr for Fault {
             Some("error") => FaultKind::Error(code(20)?),
             Some("alarm") => FaultKind::Alarm(code(2)?),
             Some("disconnect") => FaultKind::Disconnect,
-            _ => return Err(format!("fault `{s}`: kind must be error, alarm or disconnect")),
+            Some("silence") => FaultKind::Silence(u32::from(code(5000)?)),
+            _ => return Err(format!("fault `{s}`: kind must be error, alarm, disconnect or silence")),
         };
         Ok(Fault {
             at: FaultAt::LineNumber(n),

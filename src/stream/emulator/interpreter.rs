@@ -11,6 +11,9 @@ use super::line_reader::leading_line_number;
 use super::planner::{Block, BlockKind, Waiting};
 use crate::stream::program::{self, Distance, Modal, MotionMode, Spindle, Units, MAX_LINE_NUMBER};
 
+/// The modal group of G90.1/G91.1 (GRBL's `MODAL_GROUP_G4`; the other ids here are GRBL's group numbers).
+const GROUP_ARC_DISTANCE: u8 = 104;
+
 /// A block's words sorted by what they do, with the modal changes they make already applied to a copy of
 /// the parser's modal state (GRBL's steps 1–2: parse, and check each word on its own).
 #[derive(Debug, Default)]
@@ -23,6 +26,10 @@ struct Parsed {
     sync: bool,
     /// M2 / M30.
     program_end: bool,
+    /// One of G0–G3 (GRBL's `AXIS_COMMAND_MOTION_MODE`).
+    axis_command: bool,
+    /// M7, which only a build with `ENABLE_M7` accepts.
+    mist_word: bool,
     axis: [Option<f64>; 3],
     ij: [Option<f64>; 2],
     f: Option<f64>,
@@ -63,6 +70,11 @@ impl Parsed {
     fn g_word(&mut self, v: f64, g: i32, mantissa: i32, m: &mut Modal) -> Result<(), u16> {
         match (g, mantissa) {
             (0..=3, 0) | (80, 0) => {
+                // Two of G0–G3 both want the axis words: GRBL's axis command conflict comes first.
+                if g <= 3 && self.axis_command {
+                    return Err(24);
+                }
+                self.axis_command |= g <= 3;
                 self.group(1)?;
                 self.motion = Some(match g {
                     0 => MotionMode::Rapid,
@@ -93,6 +105,9 @@ impl Parsed {
                 };
             }
             (94, 0) => self.group(5)?,
+            // G91.1 (incremental I/J, GRBL's only arc mode) is accepted and does nothing; G90.1 is not.
+            (91, 1) => self.group(GROUP_ARC_DISTANCE)?,
+            (90, 1) => return Err(20),
             (54, 0) => self.group(12)?,
             (10 | 28 | 30 | 53 | 92 | 38 | 43 | 49 | 61 | 93 | 55..=59, _) => {
                 self.unmodelled = Some(format!("G{v}"));
@@ -122,6 +137,7 @@ impl Parsed {
                 self.sync = true;
             }
             7 => {
+                self.mist_word = true;
                 m.mist = true;
                 self.sync = true;
             }
@@ -208,6 +224,9 @@ impl Controller {
         let ws = program::words(text).map_err(|e| e.grbl_code())?;
         let mut m = self.modal;
         let parsed = Parsed::new(ws.iter().map(|w| (w.letter, w.value)), &mut m)?;
+        if parsed.mist_word && !self.enable_m7 {
+            return Err(20); // a default build has no M7
+        }
         if let Some(what) = &parsed.unmodelled {
             self.log.events.push(format!("not modelled: {what} in `{text}`"));
             return Err(20);

@@ -59,6 +59,9 @@ pub use pty::Emulator;
 /// The version the emulator announces.
 pub const VERSION: &str = "1.1h";
 
+/// The build date the emulator announces in `[VER:]` (that of the 1.1h release).
+pub const BUILD_DATE: &str = "20190830";
+
 /// Emulator settings.
 #[derive(Debug, Clone)]
 pub struct EmulatorConfig {
@@ -66,9 +69,14 @@ pub struct EmulatorConfig {
     pub baud: u32,
     /// Simulated motion runs this many times faster than real time (1.0 = real time).
     pub time_scale: f64,
-    /// Report `Ln` (GRBL built with `USE_LINE_NUMBERS`, as `[OPT:N…]` announces).
+    /// Report `Ln` (GRBL built with `USE_LINE_NUMBERS`, as `[OPT:N…]` announces). Off by default: a
+    /// stock 1.1h build reports `[OPT:V,15,128]`.
     pub line_numbers: bool,
-    /// Settings changed from GRBL's defaults at power-up, e.g. `(10, 3.0)` to report `Bf`.
+    /// Accept `M7` (GRBL built with `ENABLE_M7`, `M` in `[OPT:]`). Off by default, as in a stock build,
+    /// where `M7` is `error:20`.
+    pub enable_m7: bool,
+    /// Settings changed from GRBL's defaults at power-up, e.g. `(10, 3.0)` to report `Bf` (the default,
+    /// `$10=1`, reports `MPos` and no `Bf`).
     pub settings: Vec<(u16, f64)>,
     /// Injected faults.
     pub faults: Vec<Fault>,
@@ -83,7 +91,8 @@ impl Default for EmulatorConfig {
         EmulatorConfig {
             baud: 115_200,
             time_scale: 1.0,
-            line_numbers: true,
+            line_numbers: false,
+            enable_m7: false,
             settings: Vec::new(),
             faults: Vec::new(),
             reconnect_delay: Duration::from_millis(50),

@@ -1,6 +1,7 @@
-//! Motion: the blocks the interpreter makes (lines and I/J arcs, timed at their feed with no acceleration
-//! and limited by each axis' maximum rate), GRBL's 15-block planner, the commands that wait for it to empty
-//! (spindle, coolant, dwell, program end), and simulated execution — the machine position moving along
+//! Motion: the blocks the interpreter makes (lines and I/J arcs, timed at their feed — cruising at it, no
+//! acceleration between blocks — and limited by each axis' maximum rate), a feed hold that decelerates
+//! along the planned path, GRBL's 15-block planner, the commands that wait for it to empty (spindle,
+//! coolant, dwell, program end), and simulated execution — the machine position moving along
 //! the head block as simulated time advances, each finished or cut piece logged.
 
 use super::controller::{Controller, State};
@@ -118,9 +119,22 @@ impl Controller {
         }
     }
 
-    /// Advance simulated time by `dt_s` seconds: execute motion, finish dwells, run the main loop.
+    /// Advance simulated time by `dt_s` seconds: execute motion (decelerating through a feed hold),
+    /// finish dwells, run the main loop.
     pub fn advance(&mut self, dt_s: f64) {
         self.sim_time_s += dt_s;
+        if self.hold && self.decel_left_s > 0.0 {
+            // Speed falls linearly to 0 over `decel_total_s`: the path covered in this step is the
+            // integral of the speed fraction over it, run as that much time at full speed.
+            let t = dt_s.min(self.decel_left_s);
+            let (l0, l1) = (self.decel_left_s, self.decel_left_s - t);
+            let effective = (l0 * l0 - l1 * l1) / (2.0 * self.decel_total_s.max(1e-12));
+            self.decel_left_s = l1;
+            self.execute_for(effective);
+            if self.planner.is_empty() {
+                self.decel_left_s = 0.0;
+            }
+        }
         self.run_motion(dt_s);
         if self.state == State::Run && self.planner.is_empty() {
             self.state = State::Idle;
@@ -129,8 +143,29 @@ impl Controller {
     }
 
     /// Execute `dt` simulated seconds of the planner's blocks (unless holding or locked).
-    fn run_motion(&mut self, mut dt: f64) {
-        while dt > 0.0 && self.state == State::Run && !self.hold && !self.critical {
+    fn run_motion(&mut self, dt: f64) {
+        if !self.hold {
+            self.execute_for(dt);
+        }
+    }
+
+    /// The speed (mm/s) of block `b` at the current feed override.
+    pub(super) fn block_speed_mm_s(&self, b: &Block) -> f64 {
+        if b.duration_s <= 0.0 {
+            return 0.0;
+        }
+        let len: f64 = (0..3).map(|i| (b.to[i] - b.from[i]).powi(2)).sum::<f64>().sqrt();
+        let f = if b.kind == BlockKind::Rapid {
+            1.0
+        } else {
+            f64::from(self.feed_override) / 100.0
+        };
+        len / b.duration_s * f
+    }
+
+    /// Move along the planner's blocks for `dt` simulated seconds at their programmed speed.
+    fn execute_for(&mut self, mut dt: f64) {
+        while dt > 0.0 && self.state == State::Run && !self.critical {
             let Some(b) = self.planner.front_mut() else { break };
             let f = if b.kind == BlockKind::Rapid {
                 1.0
@@ -235,6 +270,7 @@ impl Controller {
         self.planner.clear();
         self.waiting = None;
         self.hold = false;
+        self.decel_left_s = 0.0;
         self.parser_pos = self.pos;
     }
 }

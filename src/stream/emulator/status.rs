@@ -10,7 +10,7 @@ use crate::stream::protocol::{PLANNER_BLOCKS, RX_BUFFER_BYTES};
 impl Controller {
     fn state_word(&self) -> String {
         if self.hold {
-            return "Hold:0".into();
+            return if self.decel_left_s > 0.0 { "Hold:1" } else { "Hold:0" }.into();
         }
         match self.state {
             State::Idle => "Idle",

@@ -6,7 +6,7 @@
 use std::collections::BTreeMap;
 
 use super::controller::{Controller, State};
-use super::VERSION;
+use super::{BUILD_DATE, VERSION};
 use crate::stream::program::{Distance, Modal, MotionMode, Spindle, Units};
 use crate::stream::protocol::{PLANNER_BLOCKS, RX_BUFFER_BYTES};
 
@@ -119,8 +119,13 @@ impl Controller {
             }
             "$G" => self.report_modes(),
             "$I" => {
-                self.say(&format!("[VER:{VERSION}.20190825:]"));
-                let opts = if self.line_numbers { "VNL" } else { "VL" };
+                self.say(&format!("[VER:{VERSION}.{BUILD_DATE}:]"));
+                // `V` variable spindle; `N` line numbers and `M` M7 only on builds that enable them.
+                let opts = format!(
+                    "V{}{}",
+                    if self.line_numbers { "N" } else { "" },
+                    if self.enable_m7 { "M" } else { "" }
+                );
                 self.say(&format!("[OPT:{opts},{PLANNER_BLOCKS},{RX_BUFFER_BYTES}]"));
             }
             "$N" => {
@@ -141,12 +146,17 @@ impl Controller {
                     return Reply::Error(8);
                 }
             }
-            t if t.contains('=') && !t.starts_with("$J=") => return self.write_setting(&t[1..], idle_or_alarm),
+            t if t.contains('=') && t[1..].starts_with(|c: char| c.is_ascii_digit()) => {
+                return self.write_setting(&t[1..], idle_or_alarm)
+            }
             other => {
                 if other.starts_with("$J=") || other == "$SLP" {
                     self.log.events.push(format!("not modelled: `{other}`"));
+                    return Reply::Error(3);
                 }
-                return Reply::Error(3);
+                // GRBL reads anything else as `$<number>=<value>`: no number is a bad number format.
+                let numeric = other[1..].starts_with(|c: char| c.is_ascii_digit() || c == '.' || c == '-');
+                return Reply::Error(if numeric { 3 } else { 2 });
             }
         }
         Reply::Ok

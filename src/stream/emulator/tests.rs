@@ -6,6 +6,7 @@ use super::*;
 fn ctl() -> Controller {
     let mut c = Controller::new(&EmulatorConfig {
         settings: vec![(10, 3.0)],
+        line_numbers: true,
         ..EmulatorConfig::default()
     });
     c.take_output();
@@ -27,13 +28,73 @@ fn answers_like_grbl() {
     assert_eq!(send(&mut c, "X\n"), "error:2\r\n");
     assert_eq!(send(&mut c, "1X\n"), "error:1\r\n");
     assert_eq!(send(&mut c, "G5X1\n"), "error:20\r\n");
-    assert_eq!(send(&mut c, "G0G1X1\n"), "error:21\r\n");
+    assert_eq!(send(&mut c, "G1G0X1\n"), "error:24\r\n", "two axis commands");
+    assert_eq!(send(&mut c, "G0G80X1\n"), "error:21\r\n");
+    assert_eq!(
+        send(&mut c, "G91.1G1X1\n"),
+        "error:22\r\n",
+        "G91.1 accepted, then no feed"
+    );
+    assert_eq!(send(&mut c, "G90.1\n"), "error:20\r\n");
+    assert_eq!(send(&mut c, "M7\n"), "error:20\r\n", "no ENABLE_M7 on a default build");
+    assert_eq!(send(&mut c, "$Z\n"), "error:2\r\n");
     assert_eq!(send(&mut c, "G0X1X2\n"), "error:25\r\n");
     assert_eq!(send(&mut c, "G1X1F100 (comment) ; tail\n"), "ok\r\n");
     assert_eq!(send(&mut c, "\n"), "ok\r\n");
     assert_eq!(send(&mut c, &format!("G1X{}\n", "1".repeat(90))), "error:11\r\n");
     assert_eq!(send(&mut c, "$99=1\n"), "error:3\r\n");
-    assert!(send(&mut c, "$I\n").contains("[OPT:VNL,15,128]"));
+    assert!(send(&mut c, "$I\n").contains("[OPT:VN,15,128]"));
+}
+
+#[test]
+fn a_default_controller_is_a_stock_build() {
+    let mut c = Controller::new(&EmulatorConfig::default());
+    c.take_output();
+    let i = send(&mut c, "$I\n");
+    assert!(
+        i.contains("[VER:1.1h.20190830:]") && i.contains("[OPT:V,15,128]"),
+        "{i}"
+    );
+    assert!(send(&mut c, "$$\n").contains("$10=1\r\n"));
+    assert_eq!(send(&mut c, "N5G1X10F300\n"), "ok\r\n");
+    c.advance(0.5);
+    let s = send(&mut c, "?");
+    assert!(
+        s.starts_with("<Run|MPos:2.500,0.000,0.000|FS:300,0"),
+        "no Bf, no Ln: {s}"
+    );
+}
+
+#[test]
+fn a_feed_hold_decelerates_and_a_completed_hold_resets_without_alarm() {
+    let mut c = ctl();
+    // 300 mm/min = 5 mm/s, $120 = 10 mm/s²: 0.5 s and 1.25 mm to stop.
+    send(&mut c, "N1G1X100F300\n");
+    c.advance(1.0);
+    send(&mut c, "!");
+    c.advance(0.2);
+    let s = send(&mut c, "?");
+    assert!(s.starts_with("<Hold:1|MPos:5.800"), "still decelerating: {s}");
+    c.advance(1.0);
+    let s = send(&mut c, "?");
+    assert!(s.starts_with("<Hold:0|MPos:6.250"), "stopped after v²/2a: {s}");
+    let out = send(&mut c, "\x18");
+    assert!(out.starts_with("\r\nGrbl 1.1h"), "no ALARM:3 after Hold:0: {out}");
+    assert!(send(&mut c, "?").starts_with("<Idle|MPos:6.250,0.000,0.000|Bf:15,128"));
+    assert_eq!(send(&mut c, "G0X1\n"), "ok\r\n", "not locked");
+}
+
+#[test]
+fn a_critical_alarm_answers_nothing_until_reset_then_a_stray_ok() {
+    let mut c = ctl();
+    send(&mut c, "$22=1\n");
+    send(&mut c, "$X\n");
+    send(&mut c, "$20=1\n");
+    assert!(send(&mut c, "G0X5\n").starts_with("ALARM:2\r\n[MSG:Reset to continue]"));
+    assert_eq!(send(&mut c, "?"), "", "no status report while locked");
+    let out = send(&mut c, "\x18");
+    assert!(out.starts_with("ok\r\n\r\nGrbl 1.1h"), "{out}");
+    assert!(send(&mut c, "?").starts_with("<Alarm|"));
 }
 
 #[test]
@@ -48,7 +109,10 @@ fn status_reports_planner_and_line() {
     );
     send(&mut c, "!");
     c.advance(10.0);
-    assert!(send(&mut c, "?").starts_with("<Hold:0|MPos:30.000"));
+    assert!(
+        send(&mut c, "?").starts_with("<Hold:0|MPos:30.050"),
+        "0.05 mm to stop from 1 mm/s"
+    );
     send(&mut c, "~");
     c.advance(31.0);
     assert!(send(&mut c, "?").starts_with("<Idle|MPos:60.000,0.000,0.000|Bf:15,128|FS:0,0"));
@@ -56,7 +120,7 @@ fn status_reports_planner_and_line() {
 }
 
 #[test]
-fn reset_while_holding_raises_alarm_3_and_logs_the_partial_block() {
+fn reset_while_a_hold_decelerates_raises_alarm_3_and_logs_the_partial_block() {
     let mut c = ctl();
     send(&mut c, "N1G1X10F60\n");
     c.advance(5.0);

@@ -3,10 +3,11 @@
 //! when allowed). Also the small exchanges used around a job: a command sent alone and waited for, a
 //! soft reset and its banner, and polling until the controller has settled.
 
+use std::collections::BTreeMap;
 use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
-use super::{Session, StreamError};
+use super::{EndDetection, Session, StreamError};
 use crate::stream::protocol::{error_text, parse_response, MachineState, Realtime, Response, Status, RX_BUFFER_BYTES};
 
 /// What the handshake learned.
@@ -48,7 +49,7 @@ impl Session<'_> {
                 probe.resend_at = None;
                 probe.sent = false;
             }
-            if self.stop.load(Ordering::SeqCst) {
+            if self.stop.swap(false, Ordering::SeqCst) {
                 return Err(StreamError::Interrupted);
             }
             if !probe.sent {
@@ -88,6 +89,7 @@ impl Session<'_> {
             if st.state == Some(MachineState::Alarm) && !probe.reset_sent && t.elapsed() > Duration::from_millis(500) {
                 self.write(&[Realtime::SoftReset.byte()])
                     .map_err(|f| self.link_err("reset", f))?;
+                self.reset_sent = true;
                 probe.reset_sent = true;
                 info.critical = true;
             }
@@ -155,6 +157,53 @@ impl Session<'_> {
                 }
             }
         }
+    }
+
+    /// Read the controller's settings (`$$`) and decide from them and `$I` how the end of the job is read:
+    /// `Ln` when the build reports line numbers and blocks are numbered, `Bf` when `$10` asks for it, else
+    /// Idle at the end point. Nothing is changed on the controller. A controller that does not list its
+    /// settings (busy, or not answering) is taken as a stock one, and the user is told.
+    pub(super) fn read_settings(&mut self, info: &Info) {
+        let bf_reported = info.status.as_ref().is_some_and(|st| st.planner_free.is_some());
+        match self.settings_listing() {
+            Ok(settings) => self.settings = settings,
+            Err(e) => self.observer.note(&format!("could not read the settings ($$): {e}")),
+        }
+        let mask = self.settings.get(&10).map(|&v| v as u32);
+        self.end_detection = if self.line_numbers {
+            EndDetection::LineNumbers
+        } else if mask.map_or(bf_reported, |m| m & 2 == 2) {
+            EndDetection::PlannerBlocks
+        } else {
+            EndDetection::IdleAtEndPoint
+        };
+    }
+
+    /// `$$`, sent alone: every `$n=value` line up to its `ok`.
+    fn settings_listing(&mut self) -> Result<BTreeMap<u16, f64>, String> {
+        self.write(b"$$\n").map_err(|f| format!("{f:?}"))?;
+        let deadline = Instant::now() + self.cfg.handshake_timeout;
+        let mut out = BTreeMap::new();
+        while Instant::now() < deadline {
+            let Some(l) = self
+                .read_line(Duration::from_millis(100))
+                .map_err(|f| format!("{f:?}"))?
+            else {
+                continue;
+            };
+            match parse_response(&l) {
+                Response::Setting(n, v) => {
+                    if let Ok(v) = v.parse() {
+                        out.insert(n, v);
+                    }
+                }
+                Response::Ok => return Ok(out),
+                Response::Error(c) => return Err(format!("error:{c} ({})", error_text(c))),
+                Response::Status(st) => self.on_status(st),
+                _ => {}
+            }
+        }
+        Err("no answer".into())
     }
 
     /// The controller must be idle to start; in alarm it is unlocked only when allowed.
@@ -287,6 +336,7 @@ impl Session<'_> {
     pub(super) fn reset_and_wait_banner(&mut self) -> Result<(), StreamError> {
         self.write(&[Realtime::SoftReset.byte()])
             .map_err(|f| self.link_err("reset", f))?;
+        self.reset_sent = true;
         self.wait_banner()
     }
 }

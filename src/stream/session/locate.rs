@@ -12,6 +12,24 @@ pub struct Located {
     pub executed: Vec<usize>,
     /// The candidate cut mid-way and the stop point (work coordinates, mm).
     pub partial: Option<(usize, [f64; 3])>,
+    /// Why the answer is only the earliest consistent one (the position lies on the path more than once):
+    /// the resume then starts at the earliest line that may not have run.
+    pub ambiguous: Option<String>,
+}
+
+/// What is known about where motion stopped: the evidence [`locate`] decides from.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Evidence {
+    /// The line the controller reported executing when motion stopped (`Ln`), if the build reports it.
+    pub ln: Option<u32>,
+    /// The stop position, work mm.
+    pub position: [f64; 3],
+    /// Where the tool was before the first candidate, when the program model cannot know it (the
+    /// position reported at the start of a fresh run, before anything moved).
+    pub origin: Option<[f64; 3]>,
+    /// The controller is idle with nothing left to run (after a disconnect it finished what it had):
+    /// motion ended at the end of a block, so a stop inside a line is no explanation.
+    pub at_rest: bool,
 }
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -33,23 +51,18 @@ fn project(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> (f64, [f64; 3]) {
     (t, q)
 }
 
-/// Given the lines that may have run (`candidates`, in order; execution is a prefix of them), the line
-/// reported executing when motion stopped (`ln`, if the controller reports `Ln`) and the stop position
-/// `p` (work mm), find which candidates ran completely and which one was cut, and where.
+/// Given the lines that may have run (`candidates`, in order; execution is a prefix of them) and the
+/// evidence of where motion stopped, find which candidates ran completely and which one was cut, and where.
 ///
-/// Every point along the candidates' path that lies within `tol` of `p` is a consistent explanation; if
-/// two of them are separated by a moving line, the answer is ambiguous and an error is returned rather
-/// than a guess. Otherwise the furthest explanation is taken (the lines between are non-moving ones).
-pub fn locate(
-    program: &Program,
-    candidates: &[usize],
-    ln: Option<u32>,
-    p: [f64; 3],
-    tol: f64,
-) -> Result<Located, String> {
-    match ln.map(|l| l as usize).filter(|l| candidates.contains(l)) {
-        Some(ln) => locate_named(program, candidates, ln, p, tol),
-        None => locate_by_position(program, candidates, p, tol),
+/// With `Ln` the controller names the line. Otherwise every point along the candidates' path within `tol`
+/// of the position is a consistent explanation; the furthest is taken when only non-moving lines separate
+/// them. When a moving line separates two explanations the position alone cannot tell them apart: the
+/// earliest is taken — the resume then starts at the earliest line that may not have run — and
+/// [`Located::ambiguous`] says why. `Err` when the position lies on none of the candidates' path.
+pub fn locate(program: &Program, candidates: &[usize], ev: &Evidence, tol: f64) -> Result<Located, String> {
+    match ev.ln.map(|l| l as usize).filter(|l| candidates.contains(l)) {
+        Some(ln) => locate_named(program, candidates, ln, ev.position, tol),
+        None => locate_by_position(program, candidates, ev, tol),
     }
 }
 
@@ -66,12 +79,14 @@ fn locate_named(program: &Program, cands: &[usize], ln: usize, p: [f64; 3], tol:
         return Ok(Located {
             executed,
             partial: None,
+            ambiguous: None,
         });
     }
     if start.is_some_and(|a| dist(a, p) <= tol) {
         return Ok(Located {
             executed,
             partial: None,
+            ambiguous: None,
         });
     }
     if let (Some(a), Some(b)) = (start, end) {
@@ -86,21 +101,23 @@ fn locate_named(program: &Program, cands: &[usize], ln: usize, p: [f64; 3], tol:
     Ok(Located {
         executed,
         partial: Some((ln, p)),
+        ambiguous: None,
     })
 }
 
-/// No line named: every point of the candidates' path within `tol` of `p` is an explanation; take the
-/// furthest, unless a moving line separates two of them.
-fn locate_by_position(program: &Program, cands: &[usize], p: [f64; 3], tol: f64) -> Result<Located, String> {
-    let consistent = explanations(program, cands, p, tol)?;
+/// No line named: every point of the candidates' path within `tol` of the position is an explanation;
+/// take the furthest, or the earliest (saying why) when a moving line separates two of them.
+fn locate_by_position(program: &Program, cands: &[usize], ev: &Evidence, tol: f64) -> Result<Located, String> {
+    let p = ev.position;
+    let consistent = explanations(program, cands, ev, tol)?;
     if cands.is_empty() {
         return Ok(Located {
             executed: Vec::new(),
             partial: None,
+            ambiguous: None,
         });
     }
     if consistent.is_empty() {
-        // Nothing ran yet: the position is where the first candidate starts.
         return Err(format!(
             "the stop position ({:.3}, {:.3}, {:.3}) lies on none of lines {:?}",
             p[0],
@@ -113,31 +130,43 @@ fn locate_by_position(program: &Program, cands: &[usize], p: [f64; 3], tol: f64)
     let lo = *consistent.iter().min_by(|x, y| cmp(x, y)).expect("non-empty");
     let hi = *consistent.iter().max_by(|x, y| cmp(x, y)).expect("non-empty");
     let spans_motion = (lo.0..hi.0).any(|i| program.line(cands[i]).is_some_and(|l| l.moves));
-    if spans_motion {
-        return Err(format!(
-            "the stop position ({:.3}, {:.3}, {:.3}) is on the path more than once (lines {} and {})",
+    let (take, ambiguous) = if spans_motion {
+        let why = format!(
+            "the stop position ({:.3}, {:.3}, {:.3}) is on the path more than once (lines {} and {}): taking \
+             the earlier, so the resume starts at the earliest line that may not have run",
             p[0],
             p[1],
             p[2],
-            cands[lo.0],
-            cands[(hi.0).min(cands.len() - 1)]
-        ));
-    }
-    let executed = cands[..hi.0.min(cands.len())].to_vec();
-    let partial = (hi.1 > 0.0 && hi.0 < cands.len()).then(|| (cands[hi.0], p));
-    Ok(Located { executed, partial })
+            cands[lo.0.min(cands.len() - 1)],
+            cands[hi.0.min(cands.len() - 1)]
+        );
+        (lo, Some(why))
+    } else {
+        (hi, None)
+    };
+    let executed = cands[..take.0.min(cands.len())].to_vec();
+    let partial = (take.1 > 0.0 && take.0 < cands.len()).then(|| (cands[take.0], p));
+    Ok(Located {
+        executed,
+        partial,
+        ambiguous,
+    })
 }
 
-/// Every progress `(index, fraction)` consistent with the position `p`: `cands[..index]` complete and
-/// `cands[index]` done up to `fraction`.
-fn explanations(program: &Program, cands: &[usize], p: [f64; 3], tol: f64) -> Result<Vec<(usize, f64)>, String> {
+/// Every progress `(index, fraction)` consistent with the evidence: `cands[..index]` complete and
+/// `cands[index]` done up to `fraction`. A candidate whose start the program model does not know starts at
+/// the evidence's origin as long as no moving candidate precedes it.
+fn explanations(program: &Program, cands: &[usize], ev: &Evidence, tol: f64) -> Result<Vec<(usize, f64)>, String> {
+    let p = ev.position;
     let mut consistent: Vec<(usize, f64)> = Vec::new();
+    let mut moved = false;
     for (i, &n) in cands.iter().enumerate() {
         let l = program
             .line(n)
             .ok_or_else(|| format!("line {n} is not in the program"))?;
+        let start = known(l.start_mm).or(if moved { None } else { ev.origin });
         if !l.moves {
-            if let Some(s) = known(l.start_mm) {
+            if let Some(s) = start {
                 if dist(s, p) <= tol {
                     consistent.push((i, 0.0));
                     consistent.push((i + 1, 0.0));
@@ -147,6 +176,7 @@ fn explanations(program: &Program, cands: &[usize], p: [f64; 3], tol: f64) -> Re
             }
             continue;
         }
+        moved = true;
         let Some(b) = known(l.end_mm) else {
             return Err(format!("line {n}'s end position is unknown to the program model"));
         };
@@ -154,11 +184,11 @@ fn explanations(program: &Program, cands: &[usize], p: [f64; 3], tol: f64) -> Re
             consistent.push((i + 1, 0.0));
         }
         // From an unknown start only the end can be recognised.
-        let Some(a) = known(l.start_mm) else { continue };
+        let Some(a) = start else { continue };
         if dist(a, p) <= tol {
             consistent.push((i, 0.0));
         }
-        if matches!(l.motion, Some(MotionMode::Rapid | MotionMode::Linear)) {
+        if !ev.at_rest && matches!(l.motion, Some(MotionMode::Rapid | MotionMode::Linear)) {
             let (t, q) = project(a, b, p);
             if t > 0.0 && t < 1.0 && dist(q, p) <= tol && dist(a, p) > tol && dist(b, p) > tol {
                 consistent.push((i, t));
@@ -179,31 +209,57 @@ mod tests {
 
     const SQUARE: &str = "G21G90\nG0X0Y0Z1\nM3S1000\nG1Z-1F100\nG1X10\nG1Y10\nG1X0\nG1Y0\nG0Z1\n";
 
+    fn ev(ln: Option<u32>, position: [f64; 3]) -> Evidence {
+        Evidence {
+            ln,
+            position,
+            origin: None,
+            at_rest: false,
+        }
+    }
+
     #[test]
     fn locates_a_stop_inside_a_line() {
         let p = prog(SQUARE);
         let c: Vec<usize> = (4..=9).collect();
-        let loc = locate(&p, &c, None, [10.0, 4.0, -1.0], 0.005).unwrap();
+        let loc = locate(&p, &c, &ev(None, [10.0, 4.0, -1.0]), 0.005).unwrap();
         assert_eq!(loc.executed, vec![4, 5]);
         assert_eq!(loc.partial, Some((6, [10.0, 4.0, -1.0])));
         // With Ln the line is named by the controller.
-        let loc = locate(&p, &c, Some(6), [10.0, 4.0, -1.0], 0.005).unwrap();
+        let loc = locate(&p, &c, &ev(Some(6), [10.0, 4.0, -1.0]), 0.005).unwrap();
         assert_eq!(loc.executed, vec![4, 5]);
         // At a corner: the line ending there is complete, the next not started.
-        let loc = locate(&p, &c, None, [10.0, 10.0, -1.0], 0.005).unwrap();
+        let loc = locate(&p, &c, &ev(None, [10.0, 10.0, -1.0]), 0.005).unwrap();
         assert_eq!((loc.executed, loc.partial), (vec![4, 5, 6], None));
     }
 
     #[test]
-    fn refuses_ambiguous_and_unknown_positions() {
+    fn an_ambiguous_position_takes_the_earliest_and_says_why() {
         let p = prog(SQUARE);
         let c: Vec<usize> = (4..=9).collect();
         // (0,0,-1) is both where line 5 starts and where line 8 ends: a full square apart.
-        assert!(locate(&p, &c, None, [0.0, 0.0, -1.0], 0.005)
-            .unwrap_err()
-            .contains("more than once"));
-        assert!(locate(&p, &c, None, [3.0, 3.0, 3.0], 0.005)
+        let loc = locate(&p, &c, &ev(None, [0.0, 0.0, -1.0]), 0.005).unwrap();
+        assert_eq!((loc.executed, loc.partial), (vec![4], None));
+        assert!(loc.ambiguous.unwrap().contains("more than once"));
+        assert!(locate(&p, &c, &ev(None, [3.0, 3.0, 3.0]), 0.005)
             .unwrap_err()
             .contains("none of"));
+    }
+
+    /// Issue 14's CI flake (seed 60): the link dropped before line 2 arrived, so the tool never left the
+    /// origin (0,0,0) — which also lies on line 4's plunge from Z2 to Z-0.5. With the origin known and the
+    /// controller at rest, nothing but line 1 can have run.
+    #[test]
+    fn the_origin_and_rest_rule_out_a_plunge_through_the_start_point() {
+        let p = prog("G21G90\nG0X0Y0Z2\nM3S1000\nG1Z-0.5F100\nG1X10\n");
+        let c: Vec<usize> = (1..=5).collect();
+        let mut e = ev(None, [0.0, 0.0, 0.0]);
+        // Without the evidence, the plunge explains the position: the old, wrong answer.
+        let old = locate(&p, &c, &e, 0.005).unwrap();
+        assert_eq!(old.executed, vec![1, 2, 3]);
+        e.origin = Some([0.0, 0.0, 0.0]);
+        e.at_rest = true;
+        let loc = locate(&p, &c, &e, 0.005).unwrap();
+        assert_eq!((loc.executed, loc.partial, loc.ambiguous), (vec![1], None, None));
     }
 }

@@ -38,8 +38,8 @@ use std::time::Instant;
 
 pub use config::{Config, Mode};
 pub use error::StreamError;
-pub use locate::{locate, Located};
-pub use outcome::{Observer, Outcome, Progress, Silent, Stats, StopReason, StopReport};
+pub use locate::{locate, Evidence, Located};
+pub use outcome::{EndDetection, Observer, Outcome, Progress, Silent, Stats, StopReason, StopReport};
 
 use super::journal::{Journal, JournalError, Record, VERSION};
 use super::program::{Line, LineKind, Program};
@@ -118,6 +118,21 @@ struct Session<'a> {
     last_ack: Option<Instant>,
     ack_seq: u64,
     status_after_ack: bool,
+    /// A soft reset went out in this session: from then on an idle controller with an empty planner
+    /// proves nothing about which lines ran (the reset emptied it).
+    reset_sent: bool,
+    /// How the end of the job is read, from what the controller offers (`$I`, `$$`).
+    end_detection: EndDetection,
+    /// Every line is sent and answered: only execution is still awaited.
+    all_answered: bool,
+    /// Consecutive status reports since the last answer showing Idle at the program's end point.
+    idle_at_end: u32,
+    /// The controller's settings as `$$` reported them (empty if it did not).
+    settings: std::collections::BTreeMap<u16, f64>,
+    /// A `WCO` has been reported, so `wco` is the controller's work offset, not a default.
+    wco_seen: bool,
+    /// Work position before the first line, when known (fresh run: the handshake's report).
+    origin: Option<[f64; 3]>,
 }
 
 /// Stream `program` over `link`, journaling to `journal_path`. `stop` is raised by Ctrl-C: the run then
@@ -189,6 +204,13 @@ impl<'a> Session<'a> {
             last_ack: None,
             ack_seq: 0,
             status_after_ack: false,
+            reset_sent: false,
+            end_detection: EndDetection::IdleAtEndPoint,
+            all_answered: false,
+            idle_at_end: 0,
+            settings: std::collections::BTreeMap::new(),
+            wco_seen: false,
+            origin: None,
         }
     }
 }
@@ -197,11 +219,13 @@ impl Session<'_> {
     /// A new job: the controller must be idle; check mode first if asked; then the whole program.
     fn run_fresh(&mut self, info: &Info, journal_path: &Path) -> Result<Outcome, StreamError> {
         self.require_idle(info, false)?;
+        self.read_settings(info);
         if self.cfg.check_first {
             self.check_run()?;
         }
+        self.origin = self.status.as_ref().and_then(|st| self.work_position(st));
         let mut j = Journal::create(journal_path)?;
-        j.record_synced(&start_record(self.program, self.cfg, 1))?;
+        j.record_synced(&start_record(self.program, self.cfg, 1, self.origin))?;
         self.journal = Some(j);
         let queue = self
             .program
@@ -212,8 +236,9 @@ impl Session<'_> {
     }
 }
 
-fn start_record(program: &Program, cfg: &Config, from_line: usize) -> Record {
+fn start_record(program: &Program, cfg: &Config, from_line: usize, position_mm: Option<[f64; 3]>) -> Record {
     Record::Start {
+        position_mm,
         version: VERSION,
         program: program.path.display().to_string(),
         fingerprint: program.fingerprint,
@@ -224,6 +249,9 @@ fn start_record(program: &Program, cfg: &Config, from_line: usize) -> Record {
 }
 
 fn record_located(j: &mut Journal, loc: &Located) -> Result<(), JournalError> {
+    if let Some(why) = &loc.ambiguous {
+        j.record(&Record::Ambiguous { message: why.clone() })?;
+    }
     for (a, b) in ranges(&loc.executed) {
         j.record(&Record::Executed { from: a, to: b })?;
     }

@@ -79,6 +79,31 @@ pub struct Stats {
     pub streaming_time: Duration,
     /// Largest number of bytes in flight (must stay ≤ 127).
     pub max_in_flight: usize,
+    /// How the end of the job was read.
+    pub end_detection: Option<EndDetection>,
+}
+
+/// How the streamer learns that the last line has executed, from what the controller offers.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EndDetection {
+    /// `Ln` in status reports (a build with `USE_LINE_NUMBERS`, `N` in `[OPT:]`, and numbered blocks):
+    /// idle with no `Ln` means the planner is empty.
+    LineNumbers,
+    /// `Bf` in status reports (`$10` bit 2): idle with all 15 planner blocks free.
+    PlannerBlocks,
+    /// Neither (a stock build with `$10=1`): every line answered, then Idle on consecutive status
+    /// reports at the program's end point.
+    IdleAtEndPoint,
+}
+
+impl std::fmt::Display for EndDetection {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            EndDetection::LineNumbers => "line numbers (Ln) in status reports",
+            EndDetection::PlannerBlocks => "planner blocks free (Bf) in status reports",
+            EndDetection::IdleAtEndPoint => "Idle on consecutive status reports at the program's end point",
+        })
+    }
 }
 
 /// How a run ended.

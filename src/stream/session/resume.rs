@@ -7,9 +7,12 @@ use std::path::Path;
 
 use super::handshake::Info;
 use super::locate::known;
-use super::{locate, record_located, start_record, Config, Outcome, Outgoing, Session, Stats, StreamError, Tag};
+use super::{
+    locate, record_located, start_record, Config, Evidence, Outcome, Outgoing, Session, Stats, StreamError, Tag,
+};
 use crate::stream::journal::{Journal, JournalState, Record};
 use crate::stream::program::{Distance, Line, Modal, MotionMode, Program, Spindle, Units};
+use crate::stream::protocol::MachineState;
 
 /// Load the journal and check that this run can resume it.
 pub(super) fn load_state(program: &Program, cfg: &Config, journal_path: &Path) -> Result<JournalState, StreamError> {
@@ -53,6 +56,7 @@ impl Session<'_> {
             })
         );
         self.require_idle(info, retained || self.cfg.unlock)?;
+        self.read_settings(info);
         let mut j = Journal::append(journal_path)?;
         let located = matches!(st.stop, Some(Record::Stop { located: true, .. }));
         if !located {
@@ -64,12 +68,18 @@ impl Session<'_> {
             j.record_synced(&Record::Complete)?;
             return Ok(Outcome::Completed(Stats::default()));
         }
-        let (first, queue) = plan_resume(program, &st, self.cfg).map_err(|what| StreamError::Resume {
+        let travel = self.travel().map_err(|what| StreamError::Resume {
             journal: journal_path.to_path_buf(),
             what,
         })?;
+        let (first, queue) =
+            plan_resume(program, &st, self.cfg, travel.as_ref()).map_err(|what| StreamError::Resume {
+                journal: journal_path.to_path_buf(),
+                what,
+            })?;
         self.executed = st.executed.clone();
-        j.record_synced(&start_record(program, self.cfg, first))?;
+        let here = self.status.as_ref().and_then(|s| self.work_position(s));
+        j.record_synced(&start_record(program, self.cfg, first, here))?;
         self.journal = Some(j);
         self.observer.note(&format!(
             "resuming at line {first} ({} lines already executed)",
@@ -97,23 +107,81 @@ impl Session<'_> {
             .copied()
             .filter(|n| !st.executed.contains(n) && !st.errors.iter().any(|e| e.0 == *n && !st.ok.contains(n)))
             .collect();
-        let loc = locate(
-            self.program,
-            &candidates,
-            status.line,
-            p,
-            self.cfg.position_tolerance_mm,
-        )
-        .map_err(|what| StreamError::Resume {
-            journal: journal_path.to_path_buf(),
-            what: format!("cannot tell which lines ran before the link dropped: {what}"),
-        })?;
+        let program = self.program;
+        let moved = st.partial.is_some() || st.executed.iter().any(|&n| program.line(n).is_some_and(|l| l.moves));
+        let ev = Evidence {
+            ln: status.line,
+            position: p,
+            // Before anything moved the tool is where the first run found it.
+            origin: if moved { None } else { st.origin },
+            // Idle with nothing executing: the controller finished what it had, so motion ended at the
+            // end of a block.
+            at_rest: status.state == Some(MachineState::Idle) && status.line.is_none(),
+        };
+        let loc =
+            locate(program, &candidates, &ev, self.cfg.position_tolerance_mm).map_err(|what| StreamError::Resume {
+                journal: journal_path.to_path_buf(),
+                what: format!("cannot tell which lines ran before the link dropped: {what}"),
+            })?;
+        if let Some(why) = &loc.ambiguous {
+            self.observer.note(why);
+        }
         record_located(j, &loc)?;
         for n in &loc.executed {
             st.executed.insert(*n);
         }
         st.partial = loc.partial;
         Ok(())
+    }
+}
+
+/// Where the machine may go, when its coordinates mean something: with homing enabled (`$22=1`) GRBL's
+/// machine space runs from `-$13x` to 0 on each axis, and the work offset places the program in it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(super) struct Travel {
+    /// `$130`–`$132`, mm.
+    pub(super) max_mm: [f64; 3],
+    /// The work coordinate offset (machine = work + offset), mm.
+    pub(super) wco_mm: [f64; 3],
+}
+
+impl Travel {
+    /// The work-coordinate range of axis `i`.
+    fn work_range(&self, i: usize) -> (f64, f64) {
+        (-self.max_mm[i] - self.wco_mm[i], -self.wco_mm[i])
+    }
+}
+
+impl Session<'_> {
+    /// The machine's travel, when `$$` says homing is on (`$22=1`) and reported `$130`–`$132`. GRBL sends
+    /// the work offset (`WCO`) only every 10–30 reports, so up to 12 more are asked for; without it the
+    /// approach cannot be checked against the travel and the resume is refused.
+    fn travel(&mut self) -> Result<Option<Travel>, String> {
+        let s = &self.settings;
+        if s.get(&22).copied() != Some(1.0) {
+            return Ok(None);
+        }
+        let (Some(&x), Some(&y), Some(&z)) = (s.get(&130), s.get(&131), s.get(&132)) else {
+            return Ok(None);
+        };
+        for _ in 0..12 {
+            if self.wco_seen {
+                break;
+            }
+            self.settled_status().map_err(|e| e.to_string())?;
+            std::thread::sleep(self.cfg.status_interval.max(std::time::Duration::from_millis(200)));
+        }
+        if !self.wco_seen {
+            return Err(
+                "the controller reported no work offset (WCO), so the approach cannot be checked \
+                        against the machine's travel"
+                    .into(),
+            );
+        }
+        Ok(Some(Travel {
+            max_mm: [x, y, z],
+            wco_mm: self.wco,
+        }))
     }
 }
 
@@ -129,7 +197,12 @@ fn fmt_mm(v: f64) -> String {
 
 /// Build what a resume sends: the modal preamble, the approach from safe Z, the rest of a line cut mid-way,
 /// and every line not yet executed. Returns the first program line and the queue.
-fn plan_resume(program: &Program, st: &JournalState, cfg: &Config) -> Result<(usize, Vec<Outgoing>), String> {
+fn plan_resume(
+    program: &Program,
+    st: &JournalState,
+    cfg: &Config,
+    travel: Option<&Travel>,
+) -> Result<(usize, Vec<Outgoing>), String> {
     let first = program
         .sendable()
         .map(|l| l.number)
@@ -139,7 +212,7 @@ fn plan_resume(program: &Program, st: &JournalState, cfg: &Config) -> Result<(us
     let line = program.line(first).expect("first is a program line");
     let moved = st.executed.iter().any(|&n| program.line(n).is_some_and(|l| l.moves)) || st.partial.is_some();
     let partial = st.partial.filter(|(n, _)| *n == first);
-    let pre = approach(line, first, moved, partial, cfg)?;
+    let pre = approach(line, first, moved, partial, cfg, travel)?;
     let mut queue: Vec<Outgoing> = pre.into_iter().map(Outgoing::synthetic).collect();
     let mut rest_from = first;
     if let Some((n, _)) = partial {
@@ -185,6 +258,7 @@ fn approach(
     moved: bool,
     partial: Option<(usize, [f64; 3])>,
     cfg: &Config,
+    travel: Option<&Travel>,
 ) -> Result<Vec<String>, String> {
     let m = line.before;
     let mut pre: Vec<String> = vec!["G21G90G17G94".into()];
@@ -195,7 +269,7 @@ fn approach(
                 format!("the position before line {first} is unknown to the program model (G28/G92/G53/homing or incremental moves from an unknown start)")
             })?,
         };
-        pre.push(format!("G0Z{}", fmt_mm(cfg.safe_z_mm.max(target[2]))));
+        pre.push(format!("G0Z{}", fmt_mm(safe_z(cfg, target, travel)?)));
         if m.spindle != Spindle::Off {
             let word = if m.spindle == Spindle::Cw { "M3" } else { "M4" };
             pre.push(format!("{word}S{}", fmt_mm(m.spindle_rpm)));
@@ -218,6 +292,30 @@ fn approach(
         pre.push(format!("G4P{}", fmt_mm(cfg.spindle_dwell_s)));
     }
     Ok(pre)
+}
+
+/// The height the approach travels at: `--safe-z-mm` (never below the resume point), lowered to the top of
+/// the machine's travel when that is known and lower. Refuses a resume point outside the travel, where the
+/// approach would hit a limit.
+fn safe_z(cfg: &Config, target: [f64; 3], travel: Option<&Travel>) -> Result<f64, String> {
+    let mut z = cfg.safe_z_mm.max(target[2]);
+    if let Some(t) = travel {
+        for (i, axis) in ["X", "Y", "Z"].iter().enumerate() {
+            let (lo, hi) = t.work_range(i);
+            if target[i] < lo - 1e-9 || target[i] > hi + 1e-9 {
+                return Err(format!(
+                    "the resume point {axis}{} lies outside the machine's travel (work {axis} {} to {}, from \
+                     ${} and the work offset): the approach would hit a limit",
+                    fmt_mm(target[i]),
+                    fmt_mm(lo),
+                    fmt_mm(hi),
+                    130 + i
+                ));
+            }
+        }
+        z = z.min(t.work_range(2).1);
+    }
+    Ok(z)
 }
 
 /// The program's units, distance mode, motion mode and feed, as one block.
@@ -292,7 +390,7 @@ mod tests {
             partial: Some((6, [10.0, 4.0, -1.0])),
             ..JournalState::default()
         };
-        let (first, q) = plan_resume(&p, &st, &Config::default()).unwrap();
+        let (first, q) = plan_resume(&p, &st, &Config::default(), None).unwrap();
         assert_eq!(first, 6);
         let texts: Vec<&str> = q.iter().map(|o| o.text.as_str()).collect();
         assert_eq!(
@@ -312,6 +410,30 @@ mod tests {
         assert_eq!(q[6].tag, Tag::Line(6));
     }
 
+    /// Issue 14: with homing on and the work offset at the machine's top, `G0 Z5` would lie beyond machine
+    /// Z 0 and raise a new soft-limit alarm: the approach stays at Z 0; a point outside travel is refused.
+    #[test]
+    fn the_approach_stays_inside_machine_travel() {
+        let p = prog(SQUARE);
+        let st = JournalState {
+            executed: (1..=5).collect(),
+            partial: Some((6, [10.0, 4.0, -1.0])),
+            ..JournalState::default()
+        };
+        let t = Travel {
+            max_mm: [200.0; 3],
+            wco_mm: [-100.0, -100.0, 0.0],
+        };
+        let (_, q) = plan_resume(&p, &st, &Config::default(), Some(&t)).unwrap();
+        assert_eq!(q[1].text, "G0Z0");
+        let far = Travel {
+            wco_mm: [-5.0, -100.0, 0.0],
+            ..t
+        };
+        let e = plan_resume(&p, &st, &Config::default(), Some(&far)).unwrap_err();
+        assert!(e.contains("outside the machine's travel"), "{e}");
+    }
+
     #[test]
     fn resume_refuses_out_of_order_execution() {
         let p = prog(SQUARE);
@@ -319,7 +441,7 @@ mod tests {
             executed: [1, 2, 3, 4, 6].into_iter().collect(),
             ..JournalState::default()
         };
-        assert!(plan_resume(&p, &st, &Config::default())
+        assert!(plan_resume(&p, &st, &Config::default(), None)
             .unwrap_err()
             .contains("diverged"));
     }

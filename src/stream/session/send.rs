@@ -14,11 +14,14 @@ impl Session<'_> {
     /// Stream the queue. Returns when everything executed or after a safe stop.
     pub(super) fn stream(&mut self, queue: Vec<Outgoing>) -> Result<Outcome, StreamError> {
         let mut q: VecDeque<Outgoing> = queue.into();
+        // A reset before streaming (the handshake's) flushed nothing of this job's.
+        self.reset_sent = false;
         self.started = Instant::now();
         self.last_rx = Instant::now();
         let run = self.stream_loop(&mut q);
         match run {
             Ok(()) => {
+                self.stats.end_detection = Some(self.end_detection);
                 if let Some(j) = self.journal.as_mut() {
                     j.record_synced(&Record::Complete)?;
                 }
@@ -31,12 +34,14 @@ impl Session<'_> {
     /// Send, read and poll until every line has been answered and is known executed, or a fault.
     fn stream_loop(&mut self, q: &mut VecDeque<Outgoing>) -> Result<(), Fault> {
         loop {
-            if self.stop.load(Ordering::SeqCst) {
+            // Taken, not just read: a second Ctrl-C while stopping then means "reset at once".
+            if self.stop.swap(false, Ordering::SeqCst) {
                 return Err(Fault::User);
             }
             self.maybe_poll()?;
             self.send_what_fits(q)?;
-            if q.is_empty() && self.counter.outstanding() == 0 {
+            self.all_answered = q.is_empty() && self.counter.outstanding() == 0;
+            if self.all_answered {
                 if let (Some(a), Some(b)) = (self.first_send, self.last_ack) {
                     self.stats.streaming_time = b.saturating_duration_since(a);
                 }
@@ -124,11 +129,23 @@ impl Session<'_> {
         self.last_ack = Some(Instant::now());
         self.ack_seq += 1;
         self.status_after_ack = false;
+        self.idle_at_end = 0;
         if let Tag::Line(n) = tag {
             self.journal(&Record::Ok { line: n })?;
-            self.planned.push_back(n);
+            self.planned_ok(n);
         }
         Ok(())
+    }
+
+    /// Line `n` was answered `ok`: it is planned. If it is a line GRBL answers only once the planner has
+    /// emptied, the answer proves that it and every line before it executed — unless a reset went out,
+    /// since a reset cuts the wait short and GRBL still answers `ok`.
+    pub(super) fn planned_ok(&mut self, n: usize) {
+        self.planned.push_back(n);
+        if !self.reset_sent && self.program.line(n).is_some_and(|l| l.synchronises()) {
+            let done: Vec<usize> = self.planned.drain(..).collect();
+            self.mark_executed(&done);
+        }
     }
 
     /// `error:code`: the oldest line in flight was rejected; the job stops unless told to carry on.
@@ -139,6 +156,7 @@ impl Session<'_> {
             .ok_or_else(|| Fault::Protocol(format!("`error:{code}` with no line in flight")))?;
         self.last_ack = Some(Instant::now());
         self.status_after_ack = false;
+        self.idle_at_end = 0;
         match tag {
             Tag::Line(n) => {
                 self.journal(&Record::Error { line: n, code })?;

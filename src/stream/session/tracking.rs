@@ -5,7 +5,8 @@
 
 use std::time::Duration;
 
-use super::{ranges, Fault, Progress, Session};
+use super::locate::known;
+use super::{ranges, EndDetection, Fault, Progress, Session};
 use crate::stream::journal::Record;
 use crate::stream::protocol::{MachineState, Status, PLANNER_BLOCKS};
 
@@ -19,11 +20,15 @@ impl Session<'_> {
             .map(|m| [m[0] - self.wco[0], m[1] - self.wco[1], m[2] - self.wco[2]])
     }
 
-    /// A status report: lines planned before the executing one (`Ln`), or all of them when the controller
-    /// is idle with an empty planner, have executed.
+    /// A status report: lines planned before the executing one (`Ln`) have executed; so have all of them
+    /// when the controller shows it is idle with an empty planner — but only before any reset in this
+    /// session (a reset empties the planner without running it), and, on a build that reports neither
+    /// `Ln` nor `Bf`, only once every line is answered and two consecutive reports since the last answer
+    /// show Idle at the program's end point.
     pub(super) fn on_status(&mut self, st: Status) {
         if let Some(w) = st.wco {
             self.wco = w;
+            self.wco_seen = true;
         }
         self.status_seq += 1;
         self.status_after_ack = true;
@@ -37,21 +42,55 @@ impl Session<'_> {
                 newly.push(n);
                 self.planned.pop_front();
             }
-        } else if st.state == Some(MachineState::Idle) && self.planner_known_empty(&st) {
+        } else if st.state == Some(MachineState::Idle) && !self.reset_sent && self.planner_known_empty(&st) {
             newly.extend(self.planned.drain(..));
+        } else if self.idle_at_end_point(&st) {
+            self.idle_at_end += 1;
+            if self.idle_at_end >= 2 {
+                newly.extend(self.planned.drain(..));
+            }
+        } else {
+            self.idle_at_end = 0;
         }
         self.mark_executed(&newly);
         self.status = Some(st);
         self.report_progress();
     }
 
-    /// Idle with nothing in the planner: without `Ln` (when line numbers are reported) or with `Bf` full.
+    /// Idle with nothing executing: with `Ln` (when line numbers are reported and used) none, or `Bf`
+    /// reporting every planner block free.
     fn planner_known_empty(&self, st: &Status) -> bool {
-        (self.line_numbers && st.line.is_none()) || st.planner_free == Some(PLANNER_BLOCKS)
+        match self.end_detection {
+            EndDetection::LineNumbers => st.line.is_none() && self.line_numbers,
+            EndDetection::PlannerBlocks => st.planner_free == Some(PLANNER_BLOCKS),
+            EndDetection::IdleAtEndPoint => false,
+        }
+    }
+
+    /// On a build without `Ln` and `Bf`: every line answered, no reset, and the report shows Idle at the
+    /// end point of the last line planned (work mm, within the position tolerance).
+    fn idle_at_end_point(&self, st: &Status) -> bool {
+        if self.end_detection != EndDetection::IdleAtEndPoint
+            || self.reset_sent
+            || !self.all_answered
+            || st.state != Some(MachineState::Idle)
+        {
+            return false;
+        }
+        let Some(&last) = self.planned.back() else {
+            return false;
+        };
+        let end = self.program.line(last).and_then(|l| known(l.end_mm));
+        match (end, self.work_position(st)) {
+            (Some(e), Some(p)) => (0..3).all(|i| (e[i] - p[i]).abs() <= self.cfg.position_tolerance_mm),
+            // The program model does not know where the job ends: Idle twice after the last answer.
+            (None, _) => true,
+            (Some(_), None) => false,
+        }
     }
 
     /// Record `lines` as executed, in the journal too.
-    fn mark_executed(&mut self, lines: &[usize]) {
+    pub(super) fn mark_executed(&mut self, lines: &[usize]) {
         if lines.is_empty() {
             return;
         }

@@ -13,11 +13,16 @@ impl Session<'_> {
         self.link.name().to_string()
     }
 
-    /// Write bytes; a failure means the link is gone.
+    /// Write bytes; a failure means the link is gone. An interrupted system call (a signal such as Ctrl-C
+    /// arriving during the write) is no failure: it is retried.
     pub(super) fn write(&mut self, bytes: &[u8]) -> Result<(), Fault> {
-        self.link
-            .write_all(bytes)
-            .map_err(|e| Fault::Disconnect(format!("write failed: {e}")))
+        loop {
+            match self.link.write_all(bytes) {
+                Ok(()) => return Ok(()),
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(Fault::Disconnect(format!("write failed: {e}"))),
+            }
+        }
     }
 
     /// Next complete line from the controller, waiting at most `timeout`.
@@ -38,10 +43,12 @@ impl Session<'_> {
                 return Ok(None);
             }
             let mut buf = [0u8; 512];
-            let n = self
-                .link
-                .read(&mut buf, deadline - now)
-                .map_err(|e| Fault::Disconnect(format!("read failed: {e}")))?;
+            let n = match self.link.read(&mut buf, deadline - now) {
+                Ok(n) => n,
+                // A signal interrupted the wait (Ctrl-C): not a lost link; read again.
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => 0,
+                Err(e) => return Err(Fault::Disconnect(format!("read failed: {e}"))),
+            };
             if self.saw.len() < 120 {
                 self.saw.push_str(&String::from_utf8_lossy(&buf[..n]));
             }
