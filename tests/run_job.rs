@@ -167,7 +167,7 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         pj["lines"].as_u64().unwrap(),
         "program.json lines"
     );
-    assert_eq!(sj[0]["lines"], pj["lines"], "sim.json read another program");
+    assert_eq!(sj["stats"]["lines"], pj["lines"], "sim.json read another program");
     assert_eq!(nc.lines().last().map(str::trim), Some("M2"));
     let (r, h): (f64, f64) = (0.25, 1e-3);
     let stepover = f(&pj["stepover_mm"]);
@@ -179,13 +179,16 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
     let (rows, cols, z) = brdfmill::npy::read_f64_2d(&p("sim.npy")).unwrap();
     assert_eq!(
         [cols as u64, rows as u64],
-        [sj[1]["nx"].as_u64().unwrap(), sj[1]["ny"].as_u64().unwrap()]
+        [
+            sj["deviation"]["nx"].as_u64().unwrap(),
+            sj["deviation"]["ny"].as_u64().unwrap()
+        ]
     );
     let zmin = z.iter().copied().fold(f64::INFINITY, f64::min);
     assert!(
-        (zmin - f(&sj[0]["min_z_mm"])).abs() < 1e-12,
+        (zmin - f(&sj["stats"]["min_z_mm"])).abs() < 1e-12,
         "sim.npy min {zmin}, sim.json {}",
-        sj[0]["min_z_mm"]
+        sj["stats"]["min_z_mm"]
     );
 
     let m = json(&p("metrics.json"));

@@ -49,7 +49,9 @@ fn emulator_for(build: Build, baud: u32, time_scale: f64, faults: Vec<Fault>) ->
 fn test_config() -> Config {
     Config {
         spindle_dwell_s: 0.1,
-        silence_timeout: Duration::from_millis(600),
+        // shorter than the 5 s default so silence faults resolve quickly, yet ten status periods (200 ms) even
+        // on a loaded 2-core machine, where 600 ms of scheduling delay was seen
+        silence_timeout: Duration::from_millis(2000),
         ..Config::default()
     }
 }
