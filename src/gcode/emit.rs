@@ -18,9 +18,10 @@
 //! many desktop GRBL routers run without homing; a job cannot run without its work Z0 set anyway.
 //!
 //! **Tool changes** ([`Move::ToolChange`]). LinuxCNC: `T<n> M6` then `G43 H<n>` (its tool table holds the
-//! length). GRBL 1.1 has no `M6`: the first tool is named in a comment (the operator mounts it and sets Z0 on
-//! the stock top before starting); every later one is an `M0` pause preceded by a `(MSG,…)` comment that
-//! GRBL shows to the operator, asking for the tool and a Z re-touch. One file with pauses keeps the work
+//! length). GRBL 1.1 has no `M6` (it reads a `T` word and ignores it): the first tool is named in a comment
+//! and a `T<n>` line (the operator mounts it and sets Z0 on the stock top before starting); every later one is
+//! a `T<n> M0` pause preceded by a `(MSG,…)` comment that GRBL shows to the operator, asking for the tool and
+//! a Z re-touch. `brdfmill simulate` reads `T<n> M0` on one line as that manual change. One file with pauses keeps the work
 //! coordinates and the program's order in one place; see `machines/README.md`.
 //!
 //! **End.** The move list ends with the retract, park, `M5` and `M9`; the writer closes with `M30`.
@@ -196,6 +197,7 @@ fn tool_change(out: &mut String, m: &mut Modal, dialect: Dialect, number: u32, d
                     "tool T{number}: {kind} D{d} mm - mount it, set Z0 on the stock top"
                 ))
             );
+            let _ = writeln!(out, "T{number}");
         }
         Dialect::Grbl => {
             let _ = writeln!(
@@ -205,7 +207,9 @@ fn tool_change(out: &mut String, m: &mut Modal, dialect: Dialect, number: u32, d
                     "MSG,Change to T{number} {kind} D{d}, re-touch Z0 on stock, cycle start"
                 ))
             );
-            let _ = writeln!(out, "M0");
+            // GRBL reads and ignores the T word; on the pause's line it tells the reader (and the simulator)
+            // which tool the operator mounts
+            let _ = writeln!(out, "T{number} M0");
         }
     }
     m.tools += 1;
@@ -375,7 +379,7 @@ mod tests {
         let g = emit(&setup(Dialect::Grbl, &[]), &moves);
         assert!(!g.contains("M6") && !g.contains("G43"), "{g}");
         assert_eq!(
-            g.matches("M0\n").count(),
+            g.matches("T3 M0\n").count(),
             1,
             "the first tool is mounted before the start: {g}"
         );

@@ -16,7 +16,7 @@
 //! | `G40 G49 G54 G61 G61.1 G64 [P Q] G80 G94` | states the simulation is already in, or path blending, which the simulation does not model: it follows the programmed path exactly |
 //! | `M0 M1` | pauses (no effect); `M2 M30` end the program (later lines are not read) |
 //! | `M3 M4 M5`, `S` | spindle; `M7 M8 M9` coolant (no effect) |
-//! | `T`, `M6` | tool select and change: every later segment carries the tool's number ([`Segment::tool`]), so the simulation sweeps each tool with its own shape |
+//! | `T`, `M6` | tool select and change (`T… M0` on one line is a manual change, as GRBL has no `M6`; a `T` before the first move is the mounted tool): every later segment carries the tool's number ([`Segment::tool`]), so the simulation sweeps each tool with its own shape |
 //! | `G43 H` | tool length offset from the table: the simulation works in tip coordinates and takes the offset as measured; an `H` other than the tool in the spindle is refused (the classic crash) |
 //! | `F` | feed, units per minute (`G94`) |
 //! | `X Y Z I J R` | coordinates, arc centre offsets, arc radius (negative: the long way round) |
@@ -378,8 +378,13 @@ fn feeds_and_tools(w: &Words, lineno: usize, st: &mut State, prog: &mut Motion) 
             return Err(err(col, format!("tool number T{t} must be a whole number ≥ 0")));
         }
         st.selected = t as u32;
+        // a tool named before the first move is the one mounted (GRBL has no M6)
+        if prog.segments.is_empty() {
+            st.tool = st.selected;
+        }
     }
-    if w.ms.iter().any(|m| m.0 == 6) {
+    // M6 changes to the selected tool; `T… M0` on one line is a manual change (GRBL's pause)
+    if w.has_m(6) || (w.has_m(0) && w.get('T').is_some()) {
         st.tool = st.selected;
     }
     if let Some((h, col)) = w.get('H') {
@@ -790,6 +795,8 @@ mod tests {
     fn tool_changes_tag_segments() {
         let g = p("T1 M6\nG43 H1\nG0 X1\nT3 M6 (MSG,change)\nM0\nG43 H3\nG0 X2\n").unwrap();
         assert_eq!(g.segments.iter().map(|s| s.tool).collect::<Vec<_>>(), [1, 3]);
+        let g = p("T2\nG0 X1\nT4\nG0 X2\nT4 M0\nG0 X3\n").unwrap();
+        assert_eq!(g.segments.iter().map(|s| s.tool).collect::<Vec<_>>(), [2, 2, 4]);
     }
 
     #[test]

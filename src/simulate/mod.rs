@@ -470,6 +470,45 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
     })
 }
 
+/// Cutting and air length of feed segments over a stock surface already cut (`before`, on its grid), mm:
+/// a segment cuts when its sweep lowers some cell of `before` by more than 1 µm (more than the
+/// simplification tolerance, so retracing a surface along slightly different chords is not cutting); every
+/// other feed segment is air (it retraces the surface or moves above it).
+/// This measures a roughing level against the stock its previous levels left.
+pub fn cut_and_air_mm(before: &Simulation, bit: Shape, segs: &[gcode::Segment]) -> (f64, f64) {
+    use rayon::prelude::*;
+    let hf = &before.heightfield;
+    let (x0, y0, p) = (before.origin_mm[0], before.origin_mm[1], hf.pitch_mm);
+    segs.par_iter()
+        .filter(|s| s.kind != gcode::SegmentKind::Rapid)
+        .map(|s| {
+            let len = crate::gcode::moves::dist(s.from, s.to);
+            let sw = sweep::Sweep::new(bit, s.from, s.to);
+            let [fx0, fy0, fx1, fy1] = sw.footprint();
+            let clamp = |v: f64, n: usize| v.clamp(0.0, n as f64) as usize;
+            let (i0, i1) = (
+                clamp(((fx0 - x0) / p).floor(), hf.nx),
+                clamp(((fx1 - x0) / p).ceil(), hf.nx),
+            );
+            let (j0, j1) = (
+                clamp(((fy0 - y0) / p).floor(), hf.ny),
+                clamp(((fy1 - y0) / p).ceil(), hf.ny),
+            );
+            let mut row = vec![0.0; i1.saturating_sub(i0)];
+            for j in j0..j1 {
+                let orig = &hf.z_mm[j * hf.nx + i0..j * hf.nx + i1];
+                row.copy_from_slice(orig);
+                let y = y0 + (j as f64 + 0.5) * p;
+                sw.row(y, x0 + (i0 as f64 + 0.5) * p, p, &mut row);
+                if row.iter().zip(orig).any(|(a, b)| *a < b - 1e-3) {
+                    return (len, 0.0);
+                }
+            }
+            (0.0, len)
+        })
+        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
+}
+
 /// Sweep each tool's segments with its own shape; the stock is the lowest of their cuts (a sweep only
 /// lowers cells, so the order of the tools does not matter). Returns the heights, a report whose
 /// `rapid_cuts` are program *lines*, and each tool's own cut when there is more than one tool.

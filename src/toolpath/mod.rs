@@ -371,16 +371,17 @@ fn stock_left(design: &raster::RotatedDesign, moves: &[Move], start: P3, bit: Sh
 }
 
 /// Intermediate finishing levels where the finishing tool would otherwise cut deeper than its depth of cut
-/// `doc`. With `S` the CL surface of the finishing tool over the stock left (the lowest its tip can sit
-/// without touching that stock), the tip engages `S − z` deep; level `k` runs at `z_k = max(CL, S − k·doc)`
-/// and cuts only where the level before had not reached CL (`S − (k−1)·doc > CL`). The final raster at CL
-/// then engages at most `doc`. Returns the number of intermediate levels.
+/// `doc`. With `S` the CL surface of the finishing tool over the stock as it stands (the lowest its tip can
+/// sit without touching it), the tip engages `S − z` deep. While some point has `S − CL > doc`, a level runs
+/// at `z = max(CL, S − doc)` where material remains above CL (`S > CL`), and the stock is then re-swept with
+/// that level's moves ([`stock_left`]), so each level is measured against the stock the one before it left,
+/// not against an estimate. The final raster at CL then engages at most `doc`. Returns the number of levels.
 #[allow(clippy::too_many_arguments)]
 fn intermediate_levels(
     b: &mut Builder,
     design: &raster::RotatedDesign,
     dc: &dropcutter::DropCutter,
-    stock: &Heightfield,
+    stock: &mut Heightfield,
     vs: &[f64],
     finals: &[Vec<P3>],
     doc: f64,
@@ -388,37 +389,38 @@ fn intermediate_levels(
     feed: f64,
     tol: f64,
 ) -> Result<usize, ToolpathError> {
-    let sdc = dropcutter::DropCutter::new(stock, dc.cutter(), dropcutter::Edge::Open);
-    let srows: Vec<Vec<P3>> = vs.par_iter().map(|v| design.pass(&sdc, *v, |z| z)).collect();
-    let worst = finals
-        .iter()
-        .zip(&srows)
-        .flat_map(|(f, s)| f.iter().zip(s).map(|(f, s)| s[2].min(0.0) - f[2]))
-        .fold(0.0, f64::max);
-    let k_total = (worst / doc - 1e-9).ceil().max(1.0) as usize;
-    if k_total > rough::MAX_LAYERS {
-        return Err(limit(
-            "max_depth_of_cut_mm",
-            format!("{k_total} finishing levels of {doc} mm for {worst:.4} mm of stock"),
-        ));
-    }
     let gap_points = (rough::GAP_DIAMETERS * dc.cutter().diameter_mm() / design.hf.pitch_mm).ceil() as usize;
-    for k in 1..k_total {
+    let relief = -finals.iter().flatten().map(|p| p[2]).fold(0.0, f64::min);
+    // each level lowers S by doc where it is above CL; a few more than relief/doc cover the rounding
+    let most = (relief / doc).ceil() as usize + 3;
+    let mut levels = 0;
+    loop {
+        let sdc = dropcutter::DropCutter::new(stock, dc.cutter(), dropcutter::Edge::Open);
+        let srows: Vec<Vec<P3>> = vs.par_iter().map(|v| design.pass(&sdc, *v, |z| z.min(0.0))).collect();
+        let worst = finals
+            .iter()
+            .zip(&srows)
+            .flat_map(|(f, s)| f.iter().zip(s).map(|(f, s)| s[2] - f[2]))
+            .fold(0.0, f64::max);
+        if worst <= doc + 1e-6 {
+            return Ok(levels);
+        }
+        if levels >= most.min(rough::MAX_LAYERS) {
+            return Err(limit(
+                "max_depth_of_cut_mm",
+                format!("{levels} finishing levels of {doc} mm still leave {worst:.4} mm of stock"),
+            ));
+        }
         b.moves.push(Move::Comment("finishing: intermediate level"));
-        let kd = k as f64 * doc;
         let mut rows = Vec::with_capacity(finals.len());
         let mut cuts = Vec::with_capacity(finals.len());
         for (r, (f, s)) in finals.iter().zip(&srows).enumerate() {
             let mut pts: Vec<P3> = f
                 .iter()
                 .zip(s)
-                .map(|(f, s)| [f[0], f[1], f[2].max(s[2].min(0.0) - kd)])
+                .map(|(f, s)| [f[0], f[1], f[2].max(s[2] - doc)])
                 .collect();
-            let mut cut: Vec<bool> = f
-                .iter()
-                .zip(s)
-                .map(|(f, s)| s[2].min(0.0) - kd + doc > f[2] + 1e-7)
-                .collect();
+            let mut cut: Vec<bool> = f.iter().zip(s).map(|(f, s)| s[2] > f[2] + 1e-6).collect();
             if r % 2 == 1 {
                 pts.reverse();
                 cut.reverse();
@@ -441,13 +443,20 @@ fn intermediate_levels(
                 .map(|p| {
                     let (u, v) = design.to_uv(p[0], p[1]);
                     let s = sdc.point(u - design.u0, v - design.v0).min(0.0);
-                    [p[0], p[1], p[2].max(s - kd)]
+                    [p[0], p[1], p[2].max(s - doc)]
                 })
                 .collect()
         };
+        let (m0, at0) = (b.moves.len(), b.at);
         rough::emit_level(b, &lv, &link);
+        let cut_now = stock_left(design, &b.moves[m0..], at0, dc.cutter());
+        stock
+            .z_mm
+            .iter_mut()
+            .zip(&cut_now.z_mm)
+            .for_each(|(a, c)| *a = a.min(*c));
+        levels += 1;
     }
-    Ok(k_total - 1)
 }
 
 /// The final finishing raster at the CL surface.
@@ -542,7 +551,7 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         b.start_tool(tool, cut);
         tool_changes += 1;
     }
-    let stock = if layers > 0 {
+    let mut stock = if layers > 0 {
         stock_left(&design, &b.moves, start, rshape)
     } else {
         Heightfield::flat(design.hf.nx, design.hf.ny, design.hf.pitch_mm, false, 0.0)
@@ -551,7 +560,7 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         &mut b,
         &design,
         &dc,
-        &stock,
+        &mut stock,
         &vs,
         &raw,
         cut.max_depth_of_cut_mm,
