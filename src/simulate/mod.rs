@@ -440,7 +440,7 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
         cutting_segments: rep.cutting_segments,
         swept_cells: rep.swept_cells,
         rapid_cuts: rep.rapid_cuts.len(),
-        rapid_cut_lines: rep.rapid_cuts.iter().take(10).map(|&k| k as usize).collect(),
+        rapid_cut_lines: rep.rapid_cuts.iter().take(10).copied().collect(),
         lines: prog.lines,
         inch: prog.inch,
         cells: [grid.nx, grid.ny],
