@@ -392,13 +392,8 @@ fn feeds_and_tools(w: &Words, lineno: usize, st: &mut State, prog: &mut Motion) 
             return Err(err(col, "`H` is only understood with G43".into()));
         }
         if h != st.tool as f64 {
-            return Err(err(
-                col,
-                format!(
-                    "G43 H{h} takes the length of another tool than the one in the spindle (T{})",
-                    st.tool
-                ),
-            ));
+            let msg = format!("G43 H{h} takes another tool's length than the spindle's (T{})", st.tool);
+            return Err(err(col, msg));
         }
     } else if let Some(&(_, col)) = w.gs.iter().find(|g| g.0 == 430) {
         return Err(err(col, "G43 without `H`: name the tool table entry".into()));
@@ -789,14 +784,6 @@ mod tests {
             let a = if a < 1e-9 { std::f64::consts::TAU } else { a };
             assert!((s.to[2] + a / std::f64::consts::TAU).abs() < 1e-9, "{s:?}");
         }
-    }
-
-    #[test]
-    fn tool_changes_tag_segments() {
-        let g = p("T1 M6\nG43 H1\nG0 X1\nT3 M6 (MSG,change)\nM0\nG43 H3\nG0 X2\n").unwrap();
-        assert_eq!(g.segments.iter().map(|s| s.tool).collect::<Vec<_>>(), [1, 3]);
-        let g = p("T2\nG0 X1\nT4\nG0 X2\nT4 M0\nG0 X3\n").unwrap();
-        assert_eq!(g.segments.iter().map(|s| s.tool).collect::<Vec<_>>(), [2, 2, 4]);
     }
 
     #[test]
