@@ -168,7 +168,7 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         "program.json lines"
     );
     assert_eq!(sj["stats"]["lines"], pj["lines"], "sim.json read another program");
-    assert_eq!(nc.lines().last().map(str::trim), Some("M2"));
+    assert_eq!(nc.lines().last().map(str::trim), Some("M30"));
     let (r, h): (f64, f64) = (0.25, 1e-3);
     let stepover = f(&pj["stepover_mm"]);
     assert!(

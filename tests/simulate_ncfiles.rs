@@ -181,3 +181,15 @@ fn linuxcnc_samples_simulate_or_are_refused_with_line_and_column() {
         "arcspiral.ngc should simulate"
     );
 }
+
+/// Tool changes tag the segments: LinuxCNC's `T M6` and GRBL's `T… M0` manual change; a `T` before the first
+/// move is the mounted tool.
+#[test]
+fn tool_changes_tag_segments() {
+    use brdfmill::simulate::gcode::{parse, ParseOptions};
+    let p = |t: &str| parse(t, &ParseOptions::default()).unwrap();
+    let g = p("T1 M6\nG43 H1\nG0 X1\nT3 M6 (MSG,change)\nM0\nG43 H3\nG0 X2\n");
+    assert_eq!(g.segments.iter().map(|s| s.tool).collect::<Vec<_>>(), [1, 3]);
+    let g = p("T2\nG0 X1\nT4\nG0 X2\nT4 M0\nG0 X3\n");
+    assert_eq!(g.segments.iter().map(|s| s.tool).collect::<Vec<_>>(), [2, 2, 4]);
+}

@@ -78,6 +78,8 @@ pub fn config(a: &Args) -> Result<SimulateConfig> {
         arc_tolerance_um: a.arc_tolerance_um,
         max_cells: a.max_cells,
         flute_length_mm: a.flute_length_mm.unwrap_or(0.0),
+        // each tool number of the program swept with the profile's shape for it (`--tool` for the rest)
+        tools: machine.as_ref().map(simulate::tool_table).unwrap_or_default(),
         machine,
         ..Default::default()
     })
@@ -98,6 +100,16 @@ pub fn run(a: &Args) -> Result<()> {
     let sim = simulate::run(&text, &cfg).map_err(|e| anyhow!("{}: {e}", a.program.display()))?;
     let t_sim = t0.elapsed().as_secs_f64();
     let dev = design.as_ref().map(|d| simulate::deviation(&sim, d, &cfg.tool));
+    // the gouge check covers each tool: its own cut against the design
+    if let Some(d) = &design {
+        for c in &sim.tool_cuts {
+            let g = simulate::deviation(&sim.of_tool(c), d, &cfg.tool).max_under_um;
+            println!(
+                "tool T{} ({}): {} segments, deepest {g:.3} µm below the design",
+                c.number, c.shape, c.segments
+            );
+        }
+    }
     let t_dev = t0.elapsed().as_secs_f64() - t_sim;
 
     // everything computed; encode, then write

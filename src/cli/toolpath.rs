@@ -32,8 +32,8 @@ pub struct Args {
     /// Raster direction (degrees from X)
     #[arg(long, default_value_t = 0.0)]
     pub angle_deg: f64,
-    /// Raster strategy: zigzag or oneway (climb)
-    #[arg(long, default_value = "zigzag")]
+    /// Raster strategy: auto (oneway where the profile has `limits.backlash`, else zigzag), zigzag or oneway (climb)
+    #[arg(long, default_value = "auto")]
     pub strategy: String,
     /// Stock material for the cutting data: aluminium or wax
     #[arg(long, default_value = "aluminium")]
@@ -67,9 +67,10 @@ pub fn config(a: &Args) -> Result<ToolpathConfig> {
         stepover_mm: a.stepover_mm.unwrap_or(0.0),
         angle_deg: a.angle_deg,
         strategy: match a.strategy.as_str() {
+            "auto" => Strategy::Auto,
             "zigzag" => Strategy::Zigzag,
             "oneway" => Strategy::Oneway,
-            s => bail!("--strategy `{s}`: expected zigzag or oneway"),
+            s => bail!("--strategy `{s}`: expected auto, zigzag or oneway"),
         },
         tolerance_um: a.tolerance_um,
         feed_mm_min: a.feed_mm_min.unwrap_or(0.0),
@@ -89,17 +90,28 @@ pub fn run(a: &Args) -> Result<()> {
     let s = &p.summary;
     println!("machine   {} ({:?}), tool {}", machine.name, machine.dialect, cfg.tool);
     println!(
-        "raster    {} finishing passes at {:.4} mm stepover (scallop {:.3} µm), {} roughing layers, design depth {:.3} mm",
-        s.finishing_passes, s.stepover_mm, s.scallop_um, s.roughing_layers, s.depth_mm
+        "raster    {} finishing passes at {:.4} mm stepover (scallop {:.3} µm), {} intermediate levels, design depth {:.3} mm",
+        s.finishing_passes, s.stepover_mm, s.scallop_um, s.finishing_levels, s.depth_mm
     );
-    println!("lines     {}", s.lines);
+    if s.roughing_layers > 0 {
+        println!(
+            "roughing  {} layers with {}, {} tool change(s)",
+            s.roughing_layers, s.roughing_tool, s.tool_changes
+        );
+    }
+    println!("lines     {} ({} motion blocks)", s.lines, s.blocks);
+    let limit = s
+        .max_blocks_s
+        .map_or("no limit".to_string(), |r| format!("limit {r} blocks/s"));
+    println!("blocks    peak {:.0} blocks/s ({limit})", s.peak_blocks_s);
     println!(
         "path      {:.1} mm cutting, {:.1} mm rapid",
         s.feed_length_mm, s.rapid_length_mm
     );
     println!(
-        "time      {} estimated (feeds, acceleration, junction deviation)",
-        toolpath::hms(s.estimated_s)
+        "time      {} estimated (feeds, acceleration, junction deviation, block rate); {} without the block-rate limit; tool changes not counted",
+        toolpath::hms(s.estimated_s),
+        toolpath::hms(s.estimated_unlimited_s)
     );
     println!(
         "extents   X {:.3}..{:.3}  Y {:.3}..{:.3}  Z {:.4}..{:.3} mm",

@@ -1,19 +1,41 @@
 //! G-code emission: a modal-state writer that never emits a word the controller is already in.
 //!
-//! **Rounding budget.** Coordinates are written with 4 decimals (0.1 µm), feeds and speeds with 1. The
-//! rounding moves a point by at most 0.05 µm per axis, an order below the default simplification
-//! tolerance (0.5 µm) and the 1 µm scallop target; the two add to at most 0.6 µm between the CL surface and
-//! the written path.
+//! **Rounding budget.** Coordinates are written on the machine's resolution `q` (profile
+//! `limits.resolution_mm`, default 0.1 µm) with the decimals it needs: X and Y rounded to the nearest step
+//! (at most `q/2` off), Z rounded *up* (`⌈z/q⌉·q`, at most `q` above, never below), so rounding never takes
+//! the tip below the cutter-location surface. Feeds and speeds carry 1 decimal.
 //!
-//! **Dialects.** GRBL 1.1 has no `G64`: its junction deviation `$11` plays that role and is set on the
-//! controller, so the program only notes it in the header. LinuxCNC gets `G64 P<tolerance>`. Both get
-//! `G21 G90 G17 G94`, `M3 S…` then a `G4` dwell before the first cut, a retract to safe z, `M5` and `M2`.
+//! **Preamble.** Header comments, then the modal safety line `G17 G21 G40 G49 G54 G80 G90 G94` (XY plane,
+//! mm, no cutter compensation, no tool-length offset, work system 1, no canned cycle, absolute, feed per
+//! minute: every state the program relies on, set whatever the controller was left in; GRBL 1.1 accepts each
+//! of these words), and for LinuxCNC `G64 P<tol>`. GRBL has no `G64`: its junction deviation `$11` plays that
+//! role on the controller and is only noted in the header.
+//!
+//! **Safe first move.** While the tool's position is unknown (at the start, and after a tool change, where
+//! the operator re-touches Z or `G43` changes the offset), a move that goes anywhere in X/Y is written as a
+//! Z-only block first and the X/Y block second, so the tool rises before it travels. The retract is in work
+//! coordinates (`G0 Z<safe>`), not `G53 G0 Z0`: machine Z0 is the top of travel only on a homed machine, and
+//! many desktop GRBL routers run without homing; a job cannot run without its work Z0 set anyway.
+//!
+//! **Tool changes** ([`Move::ToolChange`]). LinuxCNC: `T<n> M6` then `G43 H<n>` (its tool table holds the
+//! length). GRBL 1.1 has no `M6` (it reads a `T` word and ignores it): the first tool is named in a comment
+//! and a `T<n>` line (the operator mounts it and sets Z0 on the stock top before starting); every later one is
+//! a `T<n> M0` pause preceded by a `(MSG,…)` comment that GRBL shows to the operator, asking for the tool and
+//! a Z re-touch. `brdfmill simulate` reads `T<n> M0` on one line as that manual change. One file with pauses keeps the work
+//! coordinates and the program's order in one place; see `machines/README.md`.
+//!
+//! **End.** The move list ends with the retract, park, `M5` and `M9`; the writer closes with `M30`.
+//!
+//! **Comments.** Text reaches the program only through [`comment_text`]: control characters become spaces
+//! (the profile loader refuses them in names and tool ids in the first place), `(` → `[`, `)` → `]`,
+//! `;` → `,`, common non-ASCII letters are spelled out (α → alpha, µ → u, ° → deg, × → x) and any other
+//! becomes `?`, so a header line is one comment of at most 78 characters on both controllers.
 
-use super::moves::{Move, P3};
+use super::moves::{Coolant, Move, P3};
 use super::Dialect;
 use std::fmt::Write;
 
-/// Format a coordinate: 4 decimals, trailing zeros trimmed, no negative zero.
+/// Format a coordinate: `decimals` decimals, trailing zeros trimmed, no negative zero.
 pub fn num(v: f64, decimals: usize) -> String {
     let s = format!("{:.*}", decimals, v);
     let s = if s.contains('.') {
@@ -28,6 +50,58 @@ pub fn num(v: f64, decimals: usize) -> String {
     }
 }
 
+/// Text made safe for a G-code comment (see the module documentation): ASCII, no delimiters, no control
+/// characters.
+pub fn comment_text(s: &str) -> String {
+    let mut out = String::with_capacity(s.len());
+    for c in s.chars() {
+        match c {
+            '(' => out.push('['),
+            ')' => out.push(']'),
+            ';' => out.push(','),
+            c if c.is_control() => out.push(' '),
+            c if c.is_ascii() => out.push(c),
+            'α' => out.push_str("alpha"),
+            'β' => out.push_str("beta"),
+            'σ' => out.push_str("sigma"),
+            'θ' => out.push_str("theta"),
+            'φ' => out.push_str("phi"),
+            'λ' => out.push_str("lambda"),
+            'µ' | 'μ' => out.push('u'),
+            '°' => out.push_str("deg"),
+            '×' => out.push('x'),
+            '–' | '—' | '−' => out.push('-'),
+            '²' => out.push('2'),
+            '³' => out.push('3'),
+            '≤' => out.push_str("<="),
+            '≥' => out.push_str(">="),
+            '·' => out.push('*'),
+            _ => out.push('?'),
+        }
+    }
+    out
+}
+
+/// One comment line: `(text)`, at most 78 characters.
+fn comment_line(text: &str) -> String {
+    let mut clean = comment_text(text);
+    clean.truncate(76);
+    format!("({clean})")
+}
+
+/// What the writer needs besides the moves.
+#[derive(Clone, Copy, Debug)]
+pub struct Setup<'a> {
+    /// Controller dialect.
+    pub dialect: Dialect,
+    /// Header comment lines (made safe here).
+    pub header: &'a [String],
+    /// LinuxCNC's `G64 P`, mm.
+    pub path_tolerance_mm: f64,
+    /// The machine's resolution, mm: coordinates are written on multiples of it.
+    pub resolution_mm: f64,
+}
+
 /// The modal state of the controller as far as the emitter knows it.
 #[derive(Default)]
 struct Modal {
@@ -35,31 +109,34 @@ struct Modal {
     xyz: [Option<String>; 3],
     feed: Option<String>,
     spindle: Option<String>,
+    /// The tool's X/Y/Z are known (false at the start and after a tool change).
+    known: bool,
+    /// Tool changes written so far.
+    tools: usize,
+    /// Decimals and resolution of coordinates.
+    decimals: usize,
+    resolution_mm: f64,
 }
 
-/// Write a program: `header` comment lines, the preamble for `dialect`, then `moves`.
-pub fn emit(dialect: Dialect, header: &[String], path_tolerance_mm: f64, moves: &[Move]) -> String {
+/// The modal safety line written before any motion.
+pub const SAFETY_LINE: &str = "G17 G21 G40 G49 G54 G80 G90 G94";
+
+/// Write a program: header comments, the preamble for the dialect, then `moves`, then `M30`.
+pub fn emit(setup: &Setup, moves: &[Move]) -> String {
     let mut out = String::with_capacity(moves.len() * 24 + 1024);
-    for h in header {
-        // GRBL and LinuxCNC both end a comment at ')' and GRBL limits lines to 80 characters.
-        let clean: String = h
-            .chars()
-            .map(|c| if c == '(' || c == ')' { '[' } else { c })
-            .filter(|c| c.is_ascii())
-            .collect();
-        let mut line = format!("({clean})");
-        line.truncate(78);
-        if !line.ends_with(')') {
-            line.pop();
-            line.push(')');
-        }
-        let _ = writeln!(out, "{line}");
+    for h in setup.header {
+        let _ = writeln!(out, "{}", comment_line(h));
     }
-    let _ = writeln!(out, "G21 G90 G17 G94");
-    if dialect == Dialect::Linuxcnc {
-        let _ = writeln!(out, "G64 P{}", num(path_tolerance_mm, 4));
+    let _ = writeln!(out, "{SAFETY_LINE}");
+    if setup.dialect == Dialect::Linuxcnc {
+        let _ = writeln!(out, "G64 P{}", num(setup.path_tolerance_mm, 4));
     }
-    let mut m = Modal::default();
+    let q = setup.resolution_mm;
+    let mut m = Modal {
+        decimals: (-q.log10() - 1e-9).ceil().clamp(0.0, 6.0) as usize,
+        resolution_mm: q,
+        ..Default::default()
+    };
     for mv in moves {
         match *mv {
             Move::Rapid(p) => motion(&mut out, &mut m, 0, p, None),
@@ -79,22 +156,105 @@ pub fn emit(dialect: Dialect, header: &[String], path_tolerance_mm: f64, moves: 
                 let _ = writeln!(out, "G4 P{}", num(s, 3));
             }
             Move::Comment(c) => {
-                let _ = writeln!(out, "({c})");
+                let _ = writeln!(out, "{}", comment_line(c));
             }
+            Move::Coolant(c) => {
+                let _ = writeln!(
+                    out,
+                    "{}",
+                    match c {
+                        Coolant::Off => "M9",
+                        Coolant::Mist => "M7",
+                        Coolant::Flood => "M8",
+                    }
+                );
+            }
+            Move::ToolChange {
+                number,
+                diameter_mm,
+                kind,
+            } => tool_change(&mut out, &mut m, setup.dialect, number, diameter_mm, kind),
         }
     }
-    let _ = writeln!(out, "M2");
+    let _ = writeln!(out, "M30");
     out
 }
 
+/// A tool change per dialect (see the module documentation); the position is unknown afterwards.
+fn tool_change(out: &mut String, m: &mut Modal, dialect: Dialect, number: u32, diameter_mm: f64, kind: &str) {
+    let d = num(diameter_mm, 3);
+    match dialect {
+        Dialect::Linuxcnc => {
+            let _ = writeln!(out, "{}", comment_line(&format!("tool T{number}: {kind} D{d} mm")));
+            let _ = writeln!(out, "T{number} M6");
+            let _ = writeln!(out, "G43 H{number}");
+        }
+        Dialect::Grbl if m.tools == 0 => {
+            let _ = writeln!(
+                out,
+                "{}",
+                comment_line(&format!(
+                    "tool T{number}: {kind} D{d} mm - mount it, set Z0 on the stock top"
+                ))
+            );
+            let _ = writeln!(out, "T{number}");
+        }
+        Dialect::Grbl => {
+            let _ = writeln!(
+                out,
+                "{}",
+                comment_line(&format!(
+                    "MSG,Change to T{number} {kind} D{d}, re-touch Z0 on stock, cycle start"
+                ))
+            );
+            // GRBL reads and ignores the T word; on the pause's line it tells the reader (and the simulator)
+            // which tool the operator mounts
+            let _ = writeln!(out, "T{number} M0");
+        }
+    }
+    m.tools += 1;
+    m.known = false;
+    m.xyz = Default::default();
+    m.motion = None;
+    m.feed = None;
+}
+
+/// A coordinate on the machine's resolution: X/Y to the nearest step, Z up to the next (never below).
+fn coord(m: &Modal, axis: usize, v: f64) -> String {
+    let q = m.resolution_mm;
+    let steps = if axis == 2 {
+        (v / q - 1e-6).ceil()
+    } else {
+        (v / q).round()
+    };
+    num(steps * q, m.decimals)
+}
+
 fn motion(out: &mut String, m: &mut Modal, g: u8, p: P3, feed: Option<f64>) {
+    if !m.known {
+        // unknown position: rise (or descend) in Z alone first, then travel
+        let z = coord(m, 2, p[2]);
+        match feed {
+            Some(f) => {
+                let fs = num(f, 1);
+                let _ = writeln!(out, "G1 Z{z} F{fs}");
+                m.feed = Some(fs);
+            }
+            None => {
+                let _ = writeln!(out, "G0 Z{z}");
+            }
+        }
+        m.motion = Some(g);
+        m.xyz[2] = Some(z);
+        m.known = true;
+    }
     let mut line = String::new();
     if m.motion != Some(g) {
         line.push_str(if g == 0 { "G0" } else { "G1" });
         m.motion = Some(g);
     }
     for (k, axis) in ['X', 'Y', 'Z'].iter().enumerate() {
-        let s = num(p[k], 4);
+        let s = coord(m, k, p[k]);
         if m.xyz[k].as_deref() != Some(&s) {
             if !line.is_empty() {
                 line.push(' ');
@@ -132,6 +292,15 @@ fn motion(out: &mut String, m: &mut Modal, g: u8, p: P3, feed: Option<f64>) {
 mod tests {
     use super::*;
 
+    fn setup(dialect: Dialect, header: &[String]) -> Setup<'_> {
+        Setup {
+            dialect,
+            header,
+            path_tolerance_mm: 0.001,
+            resolution_mm: 1e-4,
+        }
+    }
+
     #[test]
     fn numbers_are_compact() {
         assert_eq!(num(1.5, 4), "1.5");
@@ -141,7 +310,7 @@ mod tests {
     }
 
     #[test]
-    fn no_redundant_words() {
+    fn no_redundant_words_and_z_first() {
         let moves = [
             Move::SpindleOn(10000.0),
             Move::Dwell(2.0),
@@ -154,41 +323,91 @@ mod tests {
             Move::Rapid([3.0, 0.0, 5.0]),
             Move::SpindleOff,
         ];
-        let g = emit(Dialect::Grbl, &["job".into()], 0.01, &moves);
+        let g = emit(&setup(Dialect::Grbl, &["job".into()]), &moves);
         let body: Vec<&str> = g.lines().collect();
         assert_eq!(
             body,
             [
                 "(job)",
-                "G21 G90 G17 G94",
+                SAFETY_LINE,
                 "M3 S10000",
                 "G4 P2",
-                "G0 X0 Y0 Z5",
+                "G0 Z5",
+                "X0 Y0",
                 "X1",
                 "G1 Z-0.1 F100",
                 "X2 F300",
                 "X3",
                 "G0 Z5",
                 "M5",
-                "M2"
+                "M30"
             ]
         );
-        let l = emit(Dialect::Linuxcnc, &[], 0.001, &moves);
+        let l = emit(&setup(Dialect::Linuxcnc, &[]), &moves);
         assert!(l.contains("G64 P0.001"));
         assert!(!g.contains("G64"));
     }
 
     #[test]
+    fn z_rounds_up_to_the_resolution_and_xy_to_nearest() {
+        let s = Setup {
+            resolution_mm: 0.001,
+            ..setup(Dialect::Grbl, &[])
+        };
+        let g = emit(
+            &s,
+            &[
+                Move::Rapid([0.0, 0.0, 1.0]),
+                Move::Feed([1.23449, 0.0004, -0.10001], 100.0),
+            ],
+        );
+        assert!(g.contains("G1 X1.234 Z-0.1 F100"), "Y stays 0 after rounding: {g}");
+        let g = emit(&s, &[Move::Rapid([0.0, 0.0, 1.0]), Move::Feed([1.0, 0.0, 0.3], 100.0)]);
+        assert!(g.contains("Z0.3 "), "no step up from float noise: {g}");
+    }
+
+    #[test]
+    fn tool_changes_per_dialect() {
+        let tc = Move::ToolChange {
+            number: 3,
+            diameter_mm: 3.175,
+            kind: "flat",
+        };
+        let moves = [tc, Move::Rapid([1.0, 2.0, 5.0]), tc, Move::Rapid([1.0, 2.0, 5.0])];
+        let l = emit(&setup(Dialect::Linuxcnc, &[]), &moves);
+        assert_eq!(l.matches("T3 M6\nG43 H3\nG0 Z5\nX1 Y2\n").count(), 2, "{l}");
+        let g = emit(&setup(Dialect::Grbl, &[]), &moves);
+        assert!(!g.contains("M6") && !g.contains("G43"), "{g}");
+        assert_eq!(
+            g.matches("T3 M0\n").count(),
+            1,
+            "the first tool is mounted before the start: {g}"
+        );
+        assert!(g.contains("(MSG,Change to T3 flat D3.175"), "{g}");
+        assert_eq!(g.matches("G0 Z5\nX1 Y2\n").count(), 2, "{g}");
+    }
+
+    #[test]
     fn comments_are_safe_for_both_controllers() {
         let g = emit(
-            Dialect::Grbl,
-            &["a (nested) comment with µ and a very long tail ".repeat(4)],
-            0.01,
+            &setup(
+                Dialect::Grbl,
+                &["a (nested) comment with µ α and a very long tail ".repeat(4)],
+            ),
             &[],
         );
         let first = g.lines().next().unwrap();
-        assert!(first.len() <= 80 && first.starts_with('(') && first.ends_with(')'));
+        assert!(first.len() <= 78 && first.starts_with('(') && first.ends_with(')'));
         assert_eq!(first.matches('(').count(), 1);
-        assert!(first.is_ascii());
+        assert_eq!(first.matches(')').count(), 1);
+        assert!(
+            first.is_ascii() && first.contains("[nested]") && first.contains("u alpha"),
+            "{first}"
+        );
+        assert_eq!(comment_text("router (GRBL 1.1)"), "router [GRBL 1.1]");
+        // an injected newline stays inside one comment line
+        let g = emit(&setup(Dialect::Grbl, &["evil\nG0 Z-40\nG1 X100 F5000\n;".into()]), &[]);
+        assert_eq!(g.lines().next().unwrap(), "(evil G0 Z-40 G1 X100 F5000 ,)");
+        assert!(!g.lines().any(|l| l.starts_with("G0 Z-40")));
     }
 }

@@ -21,6 +21,31 @@ pub enum Move {
     Dwell(f64),
     /// A comment line.
     Comment(&'static str),
+    /// A tool change to the tool numbered `number` (a `kind` bit of `diameter_mm`), written per dialect by
+    /// [`crate::gcode::emit`]: LinuxCNC `T M6 G43 H`, GRBL an `M0` pause with the instruction. The move list
+    /// around it already holds the `M5` and the retract before it, and the spindle start after it.
+    ToolChange {
+        /// Tool number in the machine's table (the `T`/`H` word).
+        number: u32,
+        /// Diameter, mm (for the operator's message).
+        diameter_mm: f64,
+        /// `ball`, `flat` or `bull` (for the operator's message).
+        kind: &'static str,
+    },
+    /// Coolant on (`M7` mist, `M8` flood) or off (`M9`).
+    Coolant(Coolant),
+}
+
+/// Coolant commands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Coolant {
+    /// `M9`.
+    Off,
+    /// `M7`.
+    Mist,
+    /// `M8`.
+    Flood,
 }
 
 /// Path length split by kind, mm.

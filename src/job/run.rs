@@ -331,6 +331,8 @@ fn simulate_stage(
     let job = &ready.job;
     let scfg = SimulateConfig {
         tool: shape,
+        // each tool of the program (roughing and finishing) swept with its own shape
+        tools: simulate::tool_table(&ready.machine),
         pitch_um: job.simulate.pitch_um,
         arc_tolerance_um: job.simulate.arc_tolerance_um,
         machine: Some(ready.machine.clone()),

@@ -10,13 +10,14 @@
 //! | --- | --- |
 //! | `G0 G1 G2 G3` | rapid, feed, clockwise / counter-clockwise arc (G17 plane; `I J` or `R` form; `P` full turns) |
 //! | `G4 P` | dwell, seconds |
-//! | `G17` | XY plane (`G18`, `G19` are refused: arcs in other planes are not simulated) |
+//! | `G17` | XY plane (`G18`, `G19` are refused: arcs in other planes are not simulated yet) |
 //! | `G20 G21` | inch / mm; everything is converted to mm on reading |
 //! | `G90 G91`, `G90.1 G91.1` | absolute / incremental X Y Z, and arc centres (default `G91.1`, relative to the start) |
 //! | `G40 G49 G54 G61 G61.1 G64 [P Q] G80 G94` | states the simulation is already in, or path blending, which the simulation does not model: it follows the programmed path exactly |
 //! | `M0 M1` | pauses (no effect); `M2 M30` end the program (later lines are not read) |
 //! | `M3 M4 M5`, `S` | spindle; `M7 M8 M9` coolant (no effect) |
-//! | `T`, `M6` | a tool change before the first cutting move (the simulation uses one tool; a change after cutting is refused) |
+//! | `T`, `M6` | tool select and change (`T… M0` on one line is a manual change, as GRBL has no `M6`; a `T` before the first move is the mounted tool): every later segment carries the tool's number ([`Segment::tool`]), so the simulation sweeps each tool with its own shape |
+//! | `G43 H` | tool length offset from the table: the simulation works in tip coordinates and takes the offset as measured; an `H` other than the tool in the spindle is refused (the classic crash) |
 //! | `F` | feed, units per minute (`G94`) |
 //! | `X Y Z I J R` | coordinates, arc centre offsets, arc radius (negative: the long way round) |
 //!
@@ -70,6 +71,9 @@ pub struct Segment {
     pub kind: SegmentKind,
     /// The program line, from 1.
     pub line: u32,
+    /// The tool in the spindle (the number of the last `T… M6`; 0 before any).
+    #[serde(default)]
+    pub tool: u32,
 }
 
 /// The largest coordinate the reader accepts, mm (1 km): beyond it a number is a typo or an attack, and
@@ -83,7 +87,9 @@ pub struct ParseOptions {
     pub arc_tolerance_mm: f64,
     /// Tool-tip position before the first move, mm.
     pub start_mm: P3,
-    /// Refuse a program that expands to more linear segments than this (arcs at a fine tolerance).
+    /// Refuse a program that expands to more linear segments than this (arcs at a fine tolerance). A segment
+    /// and its move take about 100 bytes, so the default 20 M bounds the program's memory near 2 GB; an arc
+    /// is refused *before* its chords are allocated when they would pass the limit.
     pub max_segments: usize,
 }
 
@@ -92,7 +98,7 @@ impl Default for ParseOptions {
         Self {
             arc_tolerance_mm: 1e-4,
             start_mm: [0.0; 3],
-            max_segments: 50_000_000,
+            max_segments: 20_000_000,
         }
     }
 }
@@ -137,7 +143,8 @@ fn g_group(t: i64) -> Result<u8, String> {
         180 | 190 => return Err("only the XY plane (G17) is supported".into()),
         280 | 281 | 300 | 301 => return Err("home positions (G28/G30) are machine-specific and not simulated".into()),
         410 | 411 | 420 | 421 => return Err("cutter radius compensation is not supported".into()),
-        430..=432 => return Err("tool length offsets are not supported".into()),
+        430 => 8,
+        431 | 432 => return Err("only the tool table's length offset (G43 H) is supported".into()),
         530 => return Err("machine coordinates (G53) are not supported".into()),
         550..=593 => return Err("only the G54 work coordinate system is supported".into()),
         730 | 760 | 810..=890 => return Err("canned cycles are not supported".into()),
@@ -145,8 +152,8 @@ fn g_group(t: i64) -> Result<u8, String> {
         930 | 950 => return Err("only units-per-minute feed (G94) is supported".into()),
         _ => {
             return Err(format!(
-                "{} is not supported (understood: G0 G1 G2 G3 G4 G17 G20 G21 G40 G49 G54 G61 G61.1 G64 G80 G90 G90.1 \
-                 G91 G91.1 G94)",
+                "{} is not supported (understood: G0 G1 G2 G3 G4 G17 G20 G21 G40 G43 G49 G54 G61 G61.1 G64 G80 G90 \
+                 G90.1 G91 G91.1 G94)",
                 gname(t)
             ))
         }
@@ -172,8 +179,10 @@ fn m_group(m: i64) -> Result<u8, String> {
 struct State {
     pos: P3,
     modal: Modal,
-    cut_yet: bool,
-    tool_changed: bool,
+    /// The tool selected by the last `T` word.
+    selected: u32,
+    /// The tool in the spindle.
+    tool: u32,
 }
 
 /// A lexed line, or the reader's error for it.
@@ -195,8 +204,8 @@ pub fn parse(text: &str, opt: &ParseOptions) -> Result<Motion, GcodeError> {
             motion: MotionMode::Cancel,
             ..Modal::default()
         },
-        cut_yet: false,
-        tool_changed: false,
+        selected: 0,
+        tool: 0,
     };
     let mut prog = Motion::default();
     let mut percents = 0;
@@ -310,7 +319,7 @@ fn sort_words(w: &[Word], lineno: usize) -> Result<Words, GcodeError> {
                     return Err(err(wd.column, "a line number `N` must come first on the line".into()));
                 }
             }
-            'X' | 'Y' | 'Z' | 'I' | 'J' | 'R' | 'F' | 'S' | 'P' | 'Q' | 'T' => {
+            'X' | 'Y' | 'Z' | 'I' | 'J' | 'R' | 'F' | 'S' | 'P' | 'Q' | 'T' | 'H' => {
                 let slot = &mut out.val[(wd.letter as u8 - b'A') as usize];
                 if slot.is_some() {
                     return Err(err(wd.column, format!("`{}` appears twice on this line", wd.letter)));
@@ -364,16 +373,30 @@ fn feeds_and_tools(w: &Words, lineno: usize, st: &mut State, prog: &mut Motion) 
         }
         st.modal.spindle_rpm = s;
     }
-    // M6: one tool for the whole simulation
-    if let Some(&(_, col)) = w.ms.iter().find(|m| m.0 == 6) {
-        if st.cut_yet || st.tool_changed {
-            return Err(err(
-                col,
-                "a tool change after cutting (or a second one): the simulation uses one tool for the whole program"
-                    .into(),
-            ));
+    if let Some((t, col)) = w.get('T') {
+        if !(t >= 0.0 && t.fract() == 0.0 && t < 1e6) {
+            return Err(err(col, format!("tool number T{t} must be a whole number ≥ 0")));
         }
-        st.tool_changed = true;
+        st.selected = t as u32;
+        // a tool named before the first move is the one mounted (GRBL has no M6)
+        if prog.segments.is_empty() {
+            st.tool = st.selected;
+        }
+    }
+    // M6 changes to the selected tool; `T… M0` on one line is a manual change (GRBL's pause)
+    if w.has_m(6) || (w.has_m(0) && w.get('T').is_some()) {
+        st.tool = st.selected;
+    }
+    if let Some((h, col)) = w.get('H') {
+        if !w.has_g(430) {
+            return Err(err(col, "`H` is only understood with G43".into()));
+        }
+        if h != st.tool as f64 {
+            let msg = format!("G43 H{h} takes another tool's length than the spindle's (T{})", st.tool);
+            return Err(err(col, msg));
+        }
+    } else if let Some(&(_, col)) = w.gs.iter().find(|g| g.0 == 430) {
+        return Err(err(col, "G43 without `H`: name the tool table entry".into()));
     }
     if w.has_m(3) || w.has_m(4) {
         prog.moves.push(Move::SpindleOn(st.modal.spindle_rpm));
@@ -492,8 +515,8 @@ fn motion(w: &Words, lineno: usize, st: &mut State, prog: &mut Motion, opt: &Par
     let from = st.pos;
     let before = prog.segments.len();
     match motion {
-        MotionMode::Rapid => push_line(prog, from, target, SegmentKind::Rapid, lineno, None),
-        MotionMode::Linear => push_line(prog, from, target, SegmentKind::Feed, lineno, Some(feed)),
+        MotionMode::Rapid => push_line(prog, st.tool, from, target, SegmentKind::Rapid, lineno, None),
+        MotionMode::Linear => push_line(prog, st.tool, from, target, SegmentKind::Feed, lineno, Some(feed)),
         _ => {
             let get = |l: char| w.get(l);
             arc(prog, st, &get, target, motion == MotionMode::ArcCw, lineno, col, opt).map_err(|m| err(m.0, m.1))?;
@@ -502,9 +525,6 @@ fn motion(w: &Words, lineno: usize, st: &mut State, prog: &mut Motion, opt: &Par
     }
     if prog.segments.len() > before {
         prog.motions += 1;
-        if motion != MotionMode::Rapid {
-            st.cut_yet = true;
-        }
     }
     if prog.segments.len() > opt.max_segments {
         return Err(err(
@@ -519,7 +539,7 @@ fn motion(w: &Words, lineno: usize, st: &mut State, prog: &mut Motion, opt: &Par
     Ok(())
 }
 
-fn push_line(prog: &mut Motion, from: P3, to: P3, kind: SegmentKind, line: usize, feed: Option<f64>) {
+fn push_line(prog: &mut Motion, tool: u32, from: P3, to: P3, kind: SegmentKind, line: usize, feed: Option<f64>) {
     if from == to {
         return;
     }
@@ -528,6 +548,7 @@ fn push_line(prog: &mut Motion, from: P3, to: P3, kind: SegmentKind, line: usize
         to,
         kind,
         line: line as u32,
+        tool,
     });
     prog.moves.push(match feed {
         None => Move::Rapid(to),
@@ -630,8 +651,17 @@ fn arc(
         (2.0 * (1.0 - tol / rmax).acos()).min(std::f64::consts::FRAC_PI_2)
     };
     let n = (sweep / dmax).ceil().max(1.0);
-    if n > opt.max_segments as f64 {
-        return Err((col, format!("the arc needs {n} chords, more than the segment limit")));
+    // estimated before a chord is allocated: the program's segments so far plus this arc's
+    if prog.segments.len() as f64 + n > opt.max_segments as f64 {
+        return Err((
+            col,
+            format!(
+                "the arc needs {n} chords; with the program's {} segments so far that passes the limit of {} \
+                 segments (max_segments, about 100 bytes each)",
+                prog.segments.len(),
+                opt.max_segments
+            ),
+        ));
     }
     let n = n as usize;
     let dir = if cw { -1.0 } else { 1.0 };
@@ -645,7 +675,7 @@ fn arc(
             let rr = r0 + (r1 - r0) * f;
             [cx + rr * a.cos(), cy + rr * a.sin(), z0 + (z1 - z0) * f]
         };
-        push_line(prog, at, p, SegmentKind::Arc, lineno, st.modal.feed_mm_min);
+        push_line(prog, st.tool, at, p, SegmentKind::Arc, lineno, st.modal.feed_mm_min);
         at = p;
     }
     Ok(())
@@ -697,7 +727,8 @@ mod tests {
             ("G2 X1 Y1 F10\n", 1, 1, "I`/`J"),
             ("G1 X1 F10\nG2 X4 Y0 I1 J0\n", 2, 1, "differs"),
             ("G0 X1 Y2 $\n", 1, 10, "unexpected"),
-            ("G1 X1 F10\nG1 X2 M6\n", 2, 7, "tool change"),
+            ("T2 M6\nG43 H1\n", 2, 5, "another tool"),
+            ("G43\n", 1, 1, "without `H`"),
             ("G80 X1\n", 1, 5, "motion mode"),
             ("G0 X1 K1\n", 1, 7, "K"),
             ("G1 X\n", 1, 4, "needs a number"),

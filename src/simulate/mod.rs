@@ -37,13 +37,44 @@ pub use crate::tool::Shape;
 use crate::toolpath::machine::Machine;
 use gcode::{Motion, ParseOptions};
 use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// The tool table of a machine profile: tool number → shape.
+pub fn tool_table(machine: &Machine) -> BTreeMap<u32, Shape> {
+    machine.tools.iter().map(|t| (t.number, t.shape)).collect()
+}
+
+impl SimulateConfig {
+    /// The bit of tool `number`.
+    pub fn shape_of(&self, number: u32) -> Shape {
+        self.tools.get(&number).copied().unwrap_or(self.tool)
+    }
+}
+
+/// One tool's own cut: its segments swept alone over the flat stock (the gouge check of each tool).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct ToolCut {
+    /// Tool number (`T`).
+    pub number: u32,
+    /// Its shape.
+    pub shape: Shape,
+    /// Heights its segments alone leave, mm, on the simulation's grid.
+    #[serde(skip)]
+    pub z_mm: Vec<f64>,
+    /// Its segments.
+    pub segments: usize,
+}
 
 /// Configuration of the simulation. Lengths carry their unit in the name.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct SimulateConfig {
-    /// The bit.
+    /// The bit (of every tool number not in `tools`).
     pub tool: Shape,
+    /// The bit of each tool number (`T… M6`): each tool's segments are swept with its own shape. Empty: `tool`
+    /// for all. [`tool_table`] reads it from a machine profile.
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub tools: BTreeMap<u32, Shape>,
     /// Stock grid pitch, µm.
     pub pitch_um: f64,
     /// Stock bounds `[x0, y0, x1, y1]`, mm; None: the XY extents of the moves that reach below the stock top
@@ -71,13 +102,14 @@ impl Default for SimulateConfig {
     fn default() -> Self {
         Self {
             tool: Shape::default(),
+            tools: BTreeMap::new(),
             pitch_um: 5.0,
             bounds_mm: None,
             stock_top_mm: 0.0,
             arc_tolerance_um: 0.1,
             start_mm: [0.0; 3],
             max_cells: 250_000_000,
-            max_segments: 50_000_000,
+            max_segments: ParseOptions::default().max_segments,
             flute_length_mm: 0.0,
             machine: None,
         }
@@ -91,6 +123,10 @@ impl SimulateConfig {
         self.tool
             .validate()
             .map_err(|e| SimulateError::Config(format!("tool {e}")))?;
+        for (n, t) in &self.tools {
+            t.validate()
+                .map_err(|e| SimulateError::Config(format!("tool T{n} {e}")))?;
+        }
         let p = self.pitch_um;
         if !(p.is_finite() && p > 0.0) {
             return bad(format!("pitch_um must be positive, got {p}"));
@@ -191,9 +227,25 @@ pub struct Simulation {
     pub origin_mm: [f64; 2],
     /// The numbers.
     pub stats: SimStats,
+    /// Each tool's own cut, when the program uses more than one tool.
+    #[serde(default, skip)]
+    pub tool_cuts: Vec<ToolCut>,
 }
 
 impl Simulation {
+    /// The surface of one tool's cut as a simulation of its own (for [`deviation`] per tool).
+    pub fn of_tool(&self, cut: &ToolCut) -> Simulation {
+        Simulation {
+            heightfield: Heightfield {
+                z_mm: cut.z_mm.clone(),
+                ..self.heightfield.clone()
+            },
+            origin_mm: self.origin_mm,
+            stats: self.stats.clone(),
+            tool_cuts: vec![],
+        }
+    }
+
     /// Work coordinates of the centre of cell `(i, j)`, mm.
     pub fn cell_xy(&self, i: usize, j: usize) -> [f64; 2] {
         let p = self.heightfield.pitch_mm;
@@ -281,7 +333,14 @@ pub fn run(program: &str, cfg: &SimulateConfig) -> Result<Simulation, SimulateEr
 /// radius on multiples of the pitch), checked against the cell limit.
 pub fn stock_grid(prog: &Motion, cfg: &SimulateConfig) -> Result<stock::Grid, SimulateError> {
     let p = cfg.pitch_um * 1e-3;
-    let r = cfg.tool.radius_mm();
+    let r = prog
+        .segments
+        .iter()
+        .map(|s| s.tool)
+        .collect::<std::collections::BTreeSet<u32>>()
+        .into_iter()
+        .map(|n| cfg.shape_of(n).radius_mm())
+        .fold(cfg.tool.radius_mm(), f64::max);
     let (x0, y0, x1, y1) = match cfg.bounds_mm {
         Some([a, b, c, d]) => (a, b, c, d),
         None => {
@@ -354,7 +413,7 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
     }
     let grid = stock_grid(prog, cfg)?;
     let top = cfg.stock_top_mm;
-    let (z, rep) = stock::sweep(&grid, top, cfg.tool, &prog.segments);
+    let (z, rep, tool_cuts) = sweep_tools(&grid, top, cfg, prog);
     let area = grid.pitch * grid.pitch;
     let removed: f64 = z.iter().map(|v| (top - v).max(0.0)).sum::<f64>() * area;
     let min_z = z.iter().copied().fold(f64::INFINITY, f64::min);
@@ -381,12 +440,7 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
         cutting_segments: rep.cutting_segments,
         swept_cells: rep.swept_cells,
         rapid_cuts: rep.rapid_cuts.len(),
-        rapid_cut_lines: rep
-            .rapid_cuts
-            .iter()
-            .take(10)
-            .map(|&k| prog.segments[k].line as usize)
-            .collect(),
+        rapid_cut_lines: rep.rapid_cuts.iter().take(10).copied().collect(),
         lines: prog.lines,
         inch: prog.inch,
         cells: [grid.nx, grid.ny],
@@ -412,7 +466,86 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
         },
         origin_mm: [grid.x0, grid.y0],
         stats,
+        tool_cuts,
     })
+}
+
+/// Cutting and air length of feed segments over a stock surface already cut (`before`, on its grid), mm:
+/// a segment cuts when its sweep lowers some cell of `before` by more than 1 µm (more than the
+/// simplification tolerance, so retracing a surface along slightly different chords is not cutting); every
+/// other feed segment is air (it retraces the surface or moves above it).
+/// This measures a roughing level against the stock its previous levels left.
+pub fn cut_and_air_mm(before: &Simulation, bit: Shape, segs: &[gcode::Segment]) -> (f64, f64) {
+    use rayon::prelude::*;
+    let hf = &before.heightfield;
+    let (x0, y0, p) = (before.origin_mm[0], before.origin_mm[1], hf.pitch_mm);
+    segs.par_iter()
+        .filter(|s| s.kind != gcode::SegmentKind::Rapid)
+        .map(|s| {
+            let len = crate::gcode::moves::dist(s.from, s.to);
+            let sw = sweep::Sweep::new(bit, s.from, s.to);
+            let [fx0, fy0, fx1, fy1] = sw.footprint();
+            let clamp = |v: f64, n: usize| v.clamp(0.0, n as f64) as usize;
+            let (i0, i1) = (
+                clamp(((fx0 - x0) / p).floor(), hf.nx),
+                clamp(((fx1 - x0) / p).ceil(), hf.nx),
+            );
+            let (j0, j1) = (
+                clamp(((fy0 - y0) / p).floor(), hf.ny),
+                clamp(((fy1 - y0) / p).ceil(), hf.ny),
+            );
+            let mut row = vec![0.0; i1.saturating_sub(i0)];
+            for j in j0..j1 {
+                let orig = &hf.z_mm[j * hf.nx + i0..j * hf.nx + i1];
+                row.copy_from_slice(orig);
+                let y = y0 + (j as f64 + 0.5) * p;
+                sw.row(y, x0 + (i0 as f64 + 0.5) * p, p, &mut row);
+                if row.iter().zip(orig).any(|(a, b)| *a < b - 1e-3) {
+                    return (len, 0.0);
+                }
+            }
+            (0.0, len)
+        })
+        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
+}
+
+/// Sweep each tool's segments with its own shape; the stock is the lowest of their cuts (a sweep only
+/// lowers cells, so the order of the tools does not matter). Returns the heights, a report whose
+/// `rapid_cuts` are program *lines*, and each tool's own cut when there is more than one tool.
+fn sweep_tools(
+    grid: &stock::Grid,
+    top: f64,
+    cfg: &SimulateConfig,
+    prog: &Motion,
+) -> (Vec<f64>, stock::SweepReport, Vec<ToolCut>) {
+    let numbers: std::collections::BTreeSet<u32> = prog.segments.iter().map(|s| s.tool).collect();
+    if numbers.len() <= 1 {
+        let n = numbers.into_iter().next().unwrap_or(0);
+        let (z, mut rep) = stock::sweep(grid, top, cfg.shape_of(n), &prog.segments);
+        rep.rapid_cuts = rep.rapid_cuts.iter().map(|&k| prog.segments[k].line as usize).collect();
+        return (z, rep, vec![]);
+    }
+    let mut z = vec![top; grid.nx * grid.ny];
+    let mut rep = stock::SweepReport::default();
+    let mut cuts = vec![];
+    for n in numbers {
+        let segs: Vec<gcode::Segment> = prog.segments.iter().filter(|s| s.tool == n).copied().collect();
+        let shape = cfg.shape_of(n);
+        let (zn, r) = stock::sweep(grid, top, shape, &segs);
+        z.iter_mut().zip(&zn).for_each(|(a, b)| *a = a.min(*b));
+        rep.swept_cells += r.swept_cells;
+        rep.cutting_segments += r.cutting_segments;
+        rep.rapid_cuts
+            .extend(r.rapid_cuts.iter().map(|&k| segs[k].line as usize));
+        cuts.push(ToolCut {
+            number: n,
+            shape,
+            z_mm: zn,
+            segments: segs.len(),
+        });
+    }
+    rep.rapid_cuts.sort_unstable();
+    (z, rep, cuts)
 }
 
 /// The simulated surface as a closed solid for STL: the top through every `stride`-th cell centre (the stride

@@ -184,6 +184,7 @@ mod tests {
                     SegmentKind::Feed
                 },
                 line: k,
+                tool: 0,
             })
             .collect();
         for bit in [

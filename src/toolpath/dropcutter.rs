@@ -40,6 +40,11 @@ impl<'a> DropCutter<'a> {
         Self { hf, cutter, edge, m }
     }
 
+    /// The bit.
+    pub fn cutter(&self) -> Shape {
+        self.cutter
+    }
+
     /// Row `j` (any integer) padded by `m` on both sides into `buf` (length `nx + 2m`).
     fn padded_row(&self, j: isize, buf: &mut [f64]) -> bool {
         let (nx, ny, m) = (self.hf.nx, self.hf.ny as isize, self.m);

@@ -16,8 +16,58 @@ struct Seg {
     acc: f64,
 }
 
+/// Run time of a program and its block rate.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Estimate {
+    /// Run time with feeds, acceleration and junction deviation only, s.
+    pub s: f64,
+    /// Run time when each motion block also takes at least `1 / max_blocks_s` (the planner's block rate,
+    /// GRBL's ~300 blocks/s on an 8-bit AVR): `Σ max(t_k, 1/rate)`, s. Equal to `s` without a limit.
+    pub block_limited_s: f64,
+    /// Motion blocks.
+    pub blocks: usize,
+    /// The most motion blocks that fall in any one second of the unlimited run, blocks/s.
+    pub peak_blocks_s: f64,
+}
+
 /// Estimated time of a move list in seconds.
 pub fn estimate_s(moves: &[Move], start: P3, machine: &Machine) -> f64 {
+    estimate(moves, start, machine, None).s
+}
+
+/// Estimated time of a move list, with and without a block-rate limit (`max_blocks_s`), and its peak block
+/// rate over a sliding one-second window.
+pub fn estimate(moves: &[Move], start: P3, machine: &Machine, max_blocks_s: Option<f64>) -> Estimate {
+    let (dwell, times) = segment_times(moves, start, machine);
+    let s = dwell + times.iter().sum::<f64>();
+    let block_limited_s = match max_blocks_s {
+        Some(r) if r > 0.0 => dwell + times.iter().map(|t| t.max(1.0 / r)).sum::<f64>(),
+        _ => s,
+    };
+    // sliding window of one second over the block end times
+    let mut ends = Vec::with_capacity(times.len());
+    let mut acc = 0.0;
+    for t in &times {
+        acc += t;
+        ends.push(acc);
+    }
+    let (mut lo, mut peak) = (0usize, 0usize);
+    for hi in 0..ends.len() {
+        while ends[hi] - ends[lo] > 1.0 {
+            lo += 1;
+        }
+        peak = peak.max(hi - lo + 1);
+    }
+    Estimate {
+        s,
+        block_limited_s,
+        blocks: times.len(),
+        peak_blocks_s: peak as f64,
+    }
+}
+
+/// The dwell total and the planned time of each motion segment, s.
+fn segment_times(moves: &[Move], start: P3, machine: &Machine) -> (f64, Vec<f64>) {
     let l = &machine.limits;
     let mut segs: Vec<Seg> = vec![];
     let mut stops: Vec<usize> = vec![]; // indices of segments that must start from rest
@@ -32,7 +82,7 @@ pub fn estimate_s(moves: &[Move], start: P3, machine: &Machine) -> f64 {
                 stops.push(segs.len());
                 continue;
             }
-            Move::SpindleOn(_) | Move::SpindleOff => {
+            Move::SpindleOn(_) | Move::SpindleOff | Move::ToolChange { .. } | Move::Coolant(_) => {
                 stops.push(segs.len());
                 continue;
             }
@@ -75,7 +125,7 @@ pub fn estimate_s(moves: &[Move], start: P3, machine: &Machine) -> f64 {
     }
     let n = segs.len();
     if n == 0 {
-        return dwell;
+        return (dwell, vec![]);
     }
     // entry speed limits (m/s in mm/s) from junctions
     let mut vmax_entry = vec![0.0; n + 1];
@@ -112,7 +162,7 @@ pub fn estimate_s(moves: &[Move], start: P3, machine: &Machine) -> f64 {
         let reach = (v[k] * v[k] + 2.0 * segs[k].acc * segs[k].len).sqrt();
         v[k + 1] = v[k + 1].min(reach);
     }
-    let mut t = dwell;
+    let mut times = Vec::with_capacity(n);
     for (k, s) in segs.iter().enumerate() {
         let (v0, v1, vn, a) = (v[k], v[k + 1], s.v_nom, s.acc);
         // peak speed of the trapezoid
@@ -120,9 +170,9 @@ pub fn estimate_s(moves: &[Move], start: P3, machine: &Machine) -> f64 {
         let d_acc = (vp * vp - v0 * v0) / (2.0 * a);
         let d_dec = (vp * vp - v1 * v1) / (2.0 * a);
         let d_cruise = (s.len - d_acc - d_dec).max(0.0);
-        t += (vp - v0) / a + (vp - v1) / a + d_cruise / vp.max(1e-12);
+        times.push((vp - v0) / a + (vp - v1) / a + d_cruise / vp.max(1e-12));
     }
-    t
+    (dwell, times)
 }
 
 #[cfg(test)]

@@ -13,6 +13,7 @@ use std::path::Path;
 /// The profile format version this build reads.
 pub const VERSION: u32 = 1;
 
+pub use crate::gcode::moves::Coolant;
 pub use crate::gcode::Dialect;
 
 /// Machine travel, mm.
@@ -45,6 +46,35 @@ pub struct Limits {
     pub acceleration_z_mm_s2: f64,
     /// Cornering tolerance: GRBL's junction deviation `$11`, LinuxCNC's `G64 P`, mm.
     pub path_tolerance_mm: f64,
+    /// The smallest step the machine resolves, mm (one motor step, or the DRO's last digit): coordinates
+    /// are written rounded to it (Z rounded up, so the path never goes below the CL surface) with as many
+    /// decimals as it needs. Default 0.0001 mm (4 decimals).
+    #[serde(default = "default_resolution_mm")]
+    pub resolution_mm: f64,
+    /// Motion blocks per second the controller's planner sustains; a program faster than that starves the
+    /// planner and the machine slows down (GRBL 1.1 on an AVR: about 300). Absent: 300 for GRBL, no limit for
+    /// LinuxCNC (its trajectory planner runs at the servo rate and blends within `G64 P`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_blocks_s: Option<f64>,
+    /// The axes have backlash (lead screws, no compensation): finishing is then one-way climb by default, so
+    /// every pass is cut with the same axis load direction. Default false.
+    #[serde(default)]
+    pub backlash: bool,
+}
+
+fn default_resolution_mm() -> f64 {
+    1e-4
+}
+
+impl Limits {
+    /// The block-rate limit in force, blocks/s (None: unlimited).
+    pub fn block_rate_limit(&self, dialect: Dialect) -> Option<f64> {
+        match (self.max_blocks_s, dialect) {
+            (Some(r), _) => Some(r),
+            (None, Dialect::Grbl) => Some(300.0),
+            (None, Dialect::Linuxcnc) => None,
+        }
+    }
 }
 
 /// Spindle speed range.
@@ -65,6 +95,28 @@ pub struct ProgramDefaults {
     pub safe_z_mm: f64,
     /// Dwell after the spindle starts, s.
     pub spindle_dwell_s: f64,
+    /// Height the program retracts to at its end and for a tool change, mm above the stock top; default
+    /// `safe_z_mm`. Must be ≥ `safe_z_mm`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub clearance_z_mm: Option<f64>,
+    /// Where the tool is parked (at the clearance height) at the end and for a tool change, work X/Y mm;
+    /// default: no park move (the tool stays over the last point).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub park_xy_mm: Option<[f64; 2]>,
+    /// Coolant while cutting: `off` (default), `mist` (`M7`) or `flood` (`M8`).
+    #[serde(default = "coolant_off")]
+    pub coolant: Coolant,
+}
+
+fn coolant_off() -> Coolant {
+    Coolant::Off
+}
+
+impl ProgramDefaults {
+    /// The end and tool-change retract height, mm.
+    pub fn clearance_z(&self) -> f64 {
+        self.clearance_z_mm.unwrap_or(self.safe_z_mm)
+    }
 }
 
 /// Cutting data for one stock material.
@@ -93,8 +145,10 @@ pub struct Tool {
     pub shape: Shape,
     /// Flute (cutting) length, mm: the deepest the tool can reach below the stock top.
     pub flute_length_mm: f64,
-    /// Tool number in the tool changer / table.
+    /// Tool number in the tool changer / table (the `T` and `H` words of a LinuxCNC tool change).
     pub number: u32,
+    /// Number of flutes (for the chip load `feed / (rpm · flutes)` in the header); default 2.
+    pub flutes: u32,
     /// Cutting data in aluminium.
     pub aluminium: CuttingData,
     /// Cutting data in machining wax and plastics.
@@ -113,8 +167,14 @@ struct ToolRecord {
     flute_length_mm: f64,
     #[serde(default)]
     number: u32,
+    #[serde(default = "two")]
+    flutes: u32,
     aluminium: CuttingData,
     wax: CuttingData,
+}
+
+fn two() -> u32 {
+    2
 }
 
 impl TryFrom<ToolRecord> for Tool {
@@ -127,6 +187,7 @@ impl TryFrom<ToolRecord> for Tool {
             shape,
             flute_length_mm: r.flute_length_mm,
             number: r.number,
+            flutes: r.flutes,
             aluminium: r.aluminium,
             wax: r.wax,
         })
@@ -142,6 +203,7 @@ impl From<Tool> for ToolRecord {
             corner_radius_mm: matches!(t.shape, Shape::Bull { .. }).then(|| t.shape.corner_radius_mm()),
             flute_length_mm: t.flute_length_mm,
             number: t.number,
+            flutes: t.flutes,
             aluminium: t.aluminium,
             wax: t.wax,
         }
@@ -265,6 +327,25 @@ fn field(field: impl Into<String>, expected: &str, value: impl std::fmt::Display
     }
 }
 
+/// Refuse text that reaches a program's comments and holds a control character: a newline would start new
+/// G-code blocks (issue 13's `name = "evil\nG0 Z-40"`), a carriage return or a NUL confuses controllers.
+/// Refused rather than cleaned, because such a name is a typo or an attack and the user should see which
+/// field. Comment delimiters `( ) ;` are legitimate in a name ("router (GRBL 1.1)") and are made safe where
+/// comments are written ([`crate::gcode::emit::comment_text`]: `(` → `[`, `)` → `]`, `;` → `,`).
+pub fn program_text(name: &str, s: &str) -> Result<(), ProfileError> {
+    if let Some(c) = s.chars().find(|c| c.is_control()) {
+        return Err(field(
+            name,
+            "text without control characters (it is written into the program's comments)",
+            format!("{s:?} (holds {c:?})"),
+        ));
+    }
+    if s.chars().count() > 60 {
+        return Err(field(name, "at most 60 characters", s.chars().count()));
+    }
+    Ok(())
+}
+
 impl Machine {
     /// Read and validate a profile.
     pub fn load(path: &Path) -> Result<Self, MachineError> {
@@ -317,6 +398,31 @@ impl Machine {
             ));
         }
         pos("program.safe_z_mm", self.program.safe_z_mm)?;
+        pos("limits.resolution_mm", l.resolution_mm)?;
+        if l.resolution_mm > 0.01 {
+            return Err(field("limits.resolution_mm", "at most 0.01 mm", l.resolution_mm));
+        }
+        if let Some(r) = l.max_blocks_s {
+            pos("limits.max_blocks_s", r)?;
+        }
+        let clear = self.program.clearance_z();
+        if !(clear.is_finite() && clear >= self.program.safe_z_mm && clear <= self.travel.z_mm) {
+            return Err(field(
+                "program.clearance_z_mm",
+                "finite, ≥ program.safe_z_mm and ≤ travel.z_mm",
+                clear,
+            ));
+        }
+        if let Some([x, y]) = self.program.park_xy_mm {
+            if !(x.is_finite() && y.is_finite() && x.abs() <= self.travel.x_mm && y.abs() <= self.travel.y_mm) {
+                return Err(field(
+                    "program.park_xy_mm",
+                    "finite and within the travel",
+                    format!("[{x}, {y}]"),
+                ));
+            }
+        }
+        program_text("name", &self.name)?;
         if self.program.spindle_dwell_s.is_nan() || self.program.spindle_dwell_s < 0.0 {
             return Err(field("program.spindle_dwell_s", "≥ 0", self.program.spindle_dwell_s));
         }
@@ -328,9 +434,25 @@ impl Machine {
             if self.tools[..k].iter().any(|o| o.id == t.id) {
                 return Err(ProfileError::DuplicateTool(t.id.clone()));
             }
+            program_text(&format!("tools[{k}].id"), &t.id)?;
             t.shape
                 .validate()
                 .map_err(|e| field(f(&e.field), &e.expected, &e.value))?;
+            // a bit wider than the machine's travel is a typo (and would ask the raster for an endless grid)
+            let widest = self.travel.x_mm.min(self.travel.y_mm);
+            if t.shape.diameter_mm() > widest {
+                return Err(field(
+                    f("diameter_mm"),
+                    &format!("at most the smaller travel, {widest} mm"),
+                    t.shape.diameter_mm(),
+                ));
+            }
+            if self.dialect == Dialect::Linuxcnc && t.number == 0 {
+                return Err(field(f("number"), "≥ 1 (LinuxCNC's `T0 M6` unloads the spindle)", 0));
+            }
+            if t.flutes == 0 || t.flutes > 16 {
+                return Err(field(f("flutes"), "in 1..=16", t.flutes));
+            }
             pos(&f("flute_length_mm"), t.flute_length_mm)?;
             for (name, c) in [("aluminium", &t.aluminium), ("wax", &t.wax)] {
                 pos(&f(&format!("{name}.feed_mm_min")), c.feed_mm_min)?;
@@ -340,6 +462,11 @@ impl Machine {
             }
         }
         Ok(())
+    }
+
+    /// The block-rate limit of this machine, blocks/s (None: unlimited).
+    pub fn block_rate_limit(&self) -> Option<f64> {
+        self.limits.block_rate_limit(self.dialect)
     }
 
     /// The tool with this id; the error lists the ones there are.

@@ -9,17 +9,20 @@
 //! The program cuts roughing layers first when the design is deeper than the tool's depth of cut
 //! (z = max(layer, CL_rough + leave)), then the finishing raster at the stepover of the target scallop.
 
+mod build;
 pub mod check;
 pub mod dropcutter;
 pub(crate) mod estimate;
 pub mod machine;
 pub(crate) mod raster;
+pub(crate) mod rough;
 pub(crate) mod simplify;
 
 use crate::gcode::emit;
 use crate::gcode::moves::{self, Move, P3};
 use crate::heightfield::Heightfield;
 use crate::tool::Shape;
+use build::{Builder, LEAD_MM};
 use machine::{Machine, Stock, Tool};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
@@ -28,6 +31,8 @@ use serde::{Deserialize, Serialize};
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Strategy {
+    /// One-way where the machine profile says its axes have backlash (`limits.backlash`), zigzag elsewhere.
+    Auto,
     /// Alternate directions, linked along the area's edge at the CL surface.
     Zigzag,
     /// Every pass in the same direction (climb for an `M3` spindle), retracting between passes.
@@ -72,7 +77,7 @@ impl Default for ToolpathConfig {
             scallop_um: 1.0,
             stepover_mm: 0.0,
             angle_deg: 0.0,
-            strategy: Strategy::Zigzag,
+            strategy: Strategy::Auto,
             tolerance_um: 0.5,
             feed_mm_min: 0.0,
             job: "brdfmill tile".into(),
@@ -92,6 +97,14 @@ pub enum ToolpathError {
     /// The machine profile does not have what the configuration asks for.
     #[error("toolpath config: {0}")]
     Profile(#[from] machine::ProfileError),
+    /// The work the configuration asks for is beyond a stated limit (an endless run or a memory bomb).
+    #[error("refused: `{field}`: {estimate}")]
+    Limit {
+        /// The field that drives the estimate.
+        field: String,
+        /// The estimate and the limit.
+        estimate: String,
+    },
 }
 
 /// What the program does, in numbers.
@@ -99,20 +112,34 @@ pub enum ToolpathError {
 pub struct Summary {
     /// Lines of G-code.
     pub lines: usize,
+    /// Motion blocks.
+    pub blocks: usize,
+    /// The most motion blocks in any one second of the run, blocks/s.
+    pub peak_blocks_s: f64,
+    /// The planner's block-rate limit of the machine, blocks/s (None: unlimited).
+    pub max_blocks_s: Option<f64>,
     /// Cutting path length, mm.
     pub feed_length_mm: f64,
     /// Rapid path length, mm.
     pub rapid_length_mm: f64,
-    /// Estimated run time, s (feeds, acceleration, junction deviation).
+    /// Estimated run time, s (feeds, acceleration, junction deviation, and the planner's block rate).
     pub estimated_s: f64,
+    /// Estimated run time without the block-rate limit, s.
+    pub estimated_unlimited_s: f64,
     /// Finishing stepover, mm.
     pub stepover_mm: f64,
     /// Scallop height of that stepover, µm.
     pub scallop_um: f64,
     /// Finishing passes.
     pub finishing_passes: usize,
-    /// Roughing layers (0 when the design is within one depth of cut).
+    /// Intermediate finishing levels (where the finishing tool would cut deeper than its depth of cut).
+    pub finishing_levels: usize,
+    /// Roughing layers (0 when the design is within the finishing tool's depth of cut).
     pub roughing_layers: usize,
+    /// The roughing tool's id (empty without roughing).
+    pub roughing_tool: String,
+    /// Tool changes after the first tool.
+    pub tool_changes: usize,
     /// Depth of the design's CL surface below the stock top, mm.
     pub depth_mm: f64,
     /// Program extents `[min, max]` of the tool tip, mm.
@@ -137,53 +164,11 @@ pub struct Toolpath {
     pub summary: Summary,
 }
 
-/// Clearance above the stock where lead-ins start and lead-outs end, mm.
-const LEAD_MM: f64 = check::RAPID_FLOOR_MM;
+/// The largest design grid the raster may sample, cells (8 bytes each: 3.2 GB).
+pub const MAX_GRID_CELLS: f64 = 4e8;
 
-struct Builder {
-    moves: Vec<Move>,
-    at: P3,
-    safe_z: f64,
-    plunge: f64,
-    max_feed_z: f64,
-}
-
-impl Builder {
-    fn rapid(&mut self, p: P3) {
-        self.moves.push(Move::Rapid(p));
-        self.at = p;
-    }
-
-    /// A feed move whose Z component respects the machine's Z feed limit.
-    fn feed(&mut self, p: P3, f: f64) {
-        let d = moves::dist(self.at, p);
-        let dz = (p[2] - self.at[2]).abs();
-        let f = if d > 0.0 && f * dz / d > self.max_feed_z {
-            self.max_feed_z * d / dz
-        } else {
-            f
-        };
-        self.moves.push(Move::Feed(p, f));
-        self.at = p;
-    }
-
-    /// Retract to safe z, travel at safe z, rapid down to the lead height, plunge to `p`.
-    fn approach(&mut self, p: P3) {
-        if self.at[2] < self.safe_z {
-            self.rapid([self.at[0], self.at[1], self.safe_z]);
-        }
-        self.rapid([p[0], p[1], self.safe_z]);
-        self.rapid([p[0], p[1], LEAD_MM.max(p[2])]);
-        let plunge = self.plunge;
-        self.feed(p, plunge);
-    }
-
-    fn path(&mut self, pts: &[P3], f: f64) {
-        for p in pts {
-            self.feed(*p, f);
-        }
-    }
-}
+/// The most finishing CL points a program may have (24 bytes each before simplification: 2.4 GB).
+pub const MAX_CL_POINTS: f64 = 1e8;
 
 /// The checked inputs of one program.
 struct Plan<'a> {
@@ -192,11 +177,75 @@ struct Plan<'a> {
     area: (f64, f64),
     stepover: f64,
     feed: f64,
+    strategy: Strategy,
 }
 
-/// Check the configuration against the machine and the tile; choose the tools and the stepover.
+/// `ToolpathError::Limit` naming the field and the estimate.
+fn limit(field: &str, what: String) -> ToolpathError {
+    ToolpathError::Limit {
+        field: field.to_string(),
+        estimate: what,
+    }
+}
+
+/// Bound the work before it starts (issue 13: a stepover of 1e-7 mm, a depth of cut of 1e-9 mm or a tool
+/// the size of the machine would run for hours or ask for terabytes): the design grid's cells, the finishing
+/// CL points and the layers of each tool, from the area, the tile's relief and the profile, each refused with
+/// the field that drives it and the estimate.
+fn bound_work(cfg: &ToolpathConfig, tile: &Heightfield, p: &Plan) -> Result<(), ToolpathError> {
+    let pitch = tile.pitch_mm;
+    let margin = p.tool.radius_mm().max(p.rough.radius_mm()) + 3.0 * pitch;
+    let diag = (p.area.0.powi(2) + p.area.1.powi(2)).sqrt();
+    let side = (diag + 2.0 * margin) / pitch + 2.0;
+    if side * side > MAX_GRID_CELLS {
+        return Err(limit(
+            "tools.diameter_mm / area_mm",
+            format!(
+                "the design grid would be about {:.3e} cells (area plus the tool radius {} mm on each side, at {} mm), above {MAX_GRID_CELLS:.0e}",
+                side * side,
+                p.tool.radius_mm().max(p.rough.radius_mm()),
+                pitch
+            ),
+        ));
+    }
+    let passes = diag / p.stepover + 1.0;
+    if passes * side > MAX_CL_POINTS {
+        let field = if cfg.stepover_mm > 0.0 {
+            "stepover_mm"
+        } else {
+            "scallop_um"
+        };
+        return Err(limit(
+            field,
+            format!(
+                "stepover {:.3e} mm gives about {passes:.3e} passes and {:.3e} CL points, above {MAX_CL_POINTS:.0e}",
+                p.stepover,
+                passes * side
+            ),
+        ));
+    }
+    let relief = -tile.z_mm.iter().copied().fold(0.0, f64::min);
+    for t in [p.rough, p.tool] {
+        let doc = t.cutting(cfg.stock).max_depth_of_cut_mm;
+        let layers = relief / doc;
+        if layers > rough::MAX_LAYERS as f64 {
+            return Err(limit(
+                &format!("tools ({}).{:?}.max_depth_of_cut_mm", t.id, cfg.stock).to_lowercase(),
+                format!(
+                    "a relief of {relief:.4} mm at {doc:e} mm per cut is about {layers:.3e} layers, above {}",
+                    rough::MAX_LAYERS
+                ),
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// Check the configuration against the machine and the tile; choose the tools, the stepover and the
+/// strategy, and bound the work.
 fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> Result<Plan<'a>, ToolpathError> {
     let bad = |s: String| Err(ToolpathError::Config(s));
+    machine::program_text("job", &cfg.job).map_err(ToolpathError::Profile)?;
     let tool = machine.tool(&cfg.tool)?;
     if !matches!(tool.shape, Shape::Ball { .. }) {
         return bad(format!(
@@ -227,8 +276,10 @@ fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> R
         return bad("the design heightfield must be periodic (a tile) to repeat over the area".into());
     }
     let r = tool.radius_mm();
-    let stepover = if cfg.stepover_mm > 0.0 {
+    let stepover = if cfg.stepover_mm > 0.0 && cfg.stepover_mm.is_finite() {
         cfg.stepover_mm
+    } else if cfg.stepover_mm != 0.0 {
+        return bad(format!("stepover_mm must be ≥ 0 and finite, got {}", cfg.stepover_mm));
     } else if cfg.scallop_um > 0.0 && cfg.scallop_um * 1e-3 < r {
         raster::stepover_for_scallop(r, cfg.scallop_um * 1e-3)
     } else {
@@ -244,29 +295,31 @@ fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> R
     } else {
         cut.feed_mm_min
     };
-    Ok(Plan {
+    let strategy = match cfg.strategy {
+        Strategy::Auto if machine.limits.backlash => Strategy::Oneway,
+        Strategy::Auto => Strategy::Zigzag,
+        s => s,
+    };
+    let p = Plan {
         tool,
         rough,
         area: (ax, ay),
         stepover,
         feed,
-    })
+        strategy,
+    };
+    bound_work(cfg, tile, &p)?;
+    Ok(p)
 }
 
-/// The finishing CL passes (in parallel), simplified one-sidedly, with the depth of the raw CL surface and
-/// the independent gouge check by direct summation: `(passes, depth_mm, checked points, max gouge mm)`.
-fn finishing_passes(
-    design: &raster::RotatedDesign,
-    dc: &dropcutter::DropCutter,
-    stepover: f64,
-    tol: f64,
-) -> (Vec<Vec<P3>>, f64, usize, f64) {
-    let (vmin, vmax) = design.v_range();
-    let vs = raster::pass_positions(vmin, vmax, stepover);
-    let raw: Vec<Vec<P3>> = vs.par_iter().map(|v| design.pass(dc, *v, |z| z)).collect();
-    let depth = -raw.iter().flatten().map(|p| p[2]).fold(f64::INFINITY, f64::min);
-    let finishing: Vec<Vec<P3>> = raw.par_iter().map(|pts| simplify::simplify(pts, tol)).collect();
-    // Every point up to 50,000, an even stride through them beyond.
+/// The finishing tool's CL rows (in parallel), raw (one point per grid column inside the area).
+fn cl_rows(design: &raster::RotatedDesign, dc: &dropcutter::DropCutter, vs: &[f64]) -> Vec<Vec<P3>> {
+    vs.par_iter().map(|v| design.pass(dc, *v, |z| z)).collect()
+}
+
+/// The independent gouge check by direct summation of the final finishing points: every point up to 50,000,
+/// an even stride through them beyond; `(checked points, max gouge mm)`.
+fn gouge_check(design: &raster::RotatedDesign, dc: &dropcutter::DropCutter, finishing: &[Vec<P3>]) -> (usize, f64) {
     let all: Vec<P3> = finishing.iter().flatten().copied().collect();
     let stride = all.len().div_ceil(50_000).max(1);
     let checked: Vec<P3> = all.iter().step_by(stride).copied().collect();
@@ -274,70 +327,139 @@ fn finishing_passes(
         .par_iter()
         .map(|p| design.cl_at(dc, p[0], p[1]) - p[2])
         .reduce(|| f64::NEG_INFINITY, f64::max);
-    (finishing, depth, checked.len(), max_gouge)
+    (checked.len(), max_gouge)
 }
 
-/// Roughing layers at the roughing tool's depth of cut while the design is deeper than one cut; returns
-/// the number of layers.
-fn roughing(
-    b: &mut Builder,
-    design: &raster::RotatedDesign,
-    rough: &Tool,
-    rough_cut: &machine::CuttingData,
-    depth: f64,
-    tol: f64,
-) -> usize {
-    let mut layers = 0;
-    if depth <= rough_cut.max_depth_of_cut_mm {
-        return 0;
-    }
-    let (vmin, vmax) = design.v_range();
-    let leave = rough_cut.max_depth_of_cut_mm / 3.0;
-    let rough_cutter = rough.shape.normalized();
-    let rs = match rough_cutter {
-        Shape::Ball { diameter_mm } => raster::stepover_for_scallop(diameter_mm / 2.0, leave).min(0.8 * diameter_mm),
-        Shape::Flat { diameter_mm } => diameter_mm / 2.0,
-        // the flat part overlaps, the corners leave a ball's scallop between them
-        Shape::Bull {
-            diameter_mm,
-            corner_radius_mm: rc,
-        } => (diameter_mm - 2.0 * rc + raster::stepover_for_scallop(rc, leave)).min(0.8 * diameter_mm),
-    };
-    let rdc = design.cutter(rough_cutter);
-    let rvs = raster::pass_positions(vmin, vmax, rs);
-    let rows: Vec<Vec<P3>> = rvs.par_iter().map(|v| design.pass(&rdc, *v, |z| z + leave)).collect();
-    let floor = rows.iter().flatten().map(|p| p[2]).fold(f64::INFINITY, f64::min);
-    let mut z_layer = 0.0;
-    while z_layer > floor {
-        z_layer -= rough_cut.max_depth_of_cut_mm;
-        layers += 1;
-        b.moves.push(Move::Comment("roughing layer"));
-        let zl = z_layer;
-        let mut first = true;
-        for (k, row) in rows.iter().enumerate() {
-            let mut pts: Vec<P3> = row.iter().map(|p| [p[0], p[1], p[2].max(zl)]).collect();
-            if k % 2 == 1 {
-                pts.reverse();
+/// The stock the moves so far leave, on the design's `(u, v)` grid: the roughing swept by the simulator's
+/// closed-form sweep ([`crate::simulate::stock::sweep`]), so the finishing knows what material remains.
+fn stock_left(design: &raster::RotatedDesign, moves: &[Move], start: P3, bit: Shape) -> Heightfield {
+    use crate::simulate::gcode::{Segment, SegmentKind};
+    let (c, s) = design.cos_sin();
+    let uv = |p: P3| [p[0] * c + p[1] * s, -p[0] * s + p[1] * c, p[2]];
+    let mut at = start;
+    let mut segs = vec![];
+    for m in moves {
+        if let Move::Rapid(p) | Move::Feed(p, _) = *m {
+            if p != at {
+                segs.push(Segment {
+                    from: uv(at),
+                    to: uv(p),
+                    kind: SegmentKind::Feed,
+                    line: 0,
+                    tool: 0,
+                });
             }
-            let pts = simplify::simplify(&pts, tol);
-            if pts.is_empty() {
-                continue; // a pass that misses the area (corners of a rotated raster)
-            }
-            if first {
-                b.approach(pts[0]);
-                first = false;
-            } else {
-                let link = link_points(design, &rdc, b.at, pts[0], |z| (z + leave).max(zl));
-                b.path(&simplify::simplify(&link, tol), rough_cut.feed_mm_min);
-            }
-            b.path(&pts[1..], rough_cut.feed_mm_min);
+            at = p;
         }
     }
-    layers
+    let hf = &design.hf;
+    let grid = crate::simulate::stock::Grid {
+        x0: design.u0,
+        y0: design.v0,
+        pitch: hf.pitch_mm,
+        nx: hf.nx,
+        ny: hf.ny,
+    };
+    let (z, _) = crate::simulate::stock::sweep(&grid, 0.0, bit, &segs);
+    Heightfield {
+        nx: hf.nx,
+        ny: hf.ny,
+        pitch_mm: hf.pitch_mm,
+        periodic: false,
+        z_mm: z,
+    }
 }
 
-/// The finishing raster, then the retract to safe z and the spindle off.
+/// Intermediate finishing levels where the finishing tool would otherwise cut deeper than its depth of cut
+/// `doc`. With `S` the CL surface of the finishing tool over the stock as it stands (the lowest its tip can
+/// sit without touching it), the tip engages `S − z` deep. While some point has `S − CL > doc`, a level runs
+/// at `z = max(CL, S − doc)` where material remains above CL (`S > CL`), and the stock is then re-swept with
+/// that level's moves ([`stock_left`]), so each level is measured against the stock the one before it left,
+/// not against an estimate. The final raster at CL then engages at most `doc`. Returns the number of levels.
 #[allow(clippy::too_many_arguments)]
+fn intermediate_levels(
+    b: &mut Builder,
+    design: &raster::RotatedDesign,
+    dc: &dropcutter::DropCutter,
+    stock: &mut Heightfield,
+    vs: &[f64],
+    finals: &[Vec<P3>],
+    doc: f64,
+    stepover: f64,
+    feed: f64,
+    tol: f64,
+) -> Result<usize, ToolpathError> {
+    let gap_points = (rough::GAP_DIAMETERS * dc.cutter().diameter_mm() / design.hf.pitch_mm).ceil() as usize;
+    let relief = -finals.iter().flatten().map(|p| p[2]).fold(0.0, f64::min);
+    // each level lowers S by doc where it is above CL; a few more than relief/doc cover the rounding
+    let most = (relief / doc).ceil() as usize + 3;
+    let mut levels = 0;
+    loop {
+        let sdc = dropcutter::DropCutter::new(stock, dc.cutter(), dropcutter::Edge::Open);
+        let srows: Vec<Vec<P3>> = vs.par_iter().map(|v| design.pass(&sdc, *v, |z| z.min(0.0))).collect();
+        let worst = finals
+            .iter()
+            .zip(&srows)
+            .flat_map(|(f, s)| f.iter().zip(s).map(|(f, s)| s[2] - f[2]))
+            .fold(0.0, f64::max);
+        if worst <= doc + 1e-6 {
+            return Ok(levels);
+        }
+        if levels >= most.min(rough::MAX_LAYERS) {
+            return Err(limit(
+                "max_depth_of_cut_mm",
+                format!("{levels} finishing levels of {doc} mm still leave {worst:.4} mm of stock"),
+            ));
+        }
+        b.moves.push(Move::Comment("finishing: intermediate level"));
+        let mut rows = Vec::with_capacity(finals.len());
+        let mut cuts = Vec::with_capacity(finals.len());
+        for (r, (f, s)) in finals.iter().zip(&srows).enumerate() {
+            let mut pts: Vec<P3> = f
+                .iter()
+                .zip(s)
+                .map(|(f, s)| [f[0], f[1], f[2].max(s[2] - doc)])
+                .collect();
+            let mut cut: Vec<bool> = f.iter().zip(s).map(|(f, s)| s[2] > f[2] + 1e-6).collect();
+            if r % 2 == 1 {
+                pts.reverse();
+                cut.reverse();
+            }
+            rows.push(pts);
+            cuts.push(cut);
+        }
+        let lv = rough::Level {
+            rows: &rows,
+            cut: &cuts,
+            feed_mm_min: feed,
+            stepover_mm: stepover,
+            gap_points,
+            pitch_mm: design.hf.pitch_mm,
+            tol_mm: tol,
+        };
+        let link = |a: P3, e: P3| {
+            link_points(design, dc, a, e, |z| z)
+                .into_iter()
+                .map(|p| {
+                    let (u, v) = design.to_uv(p[0], p[1]);
+                    let s = sdc.point(u - design.u0, v - design.v0).min(0.0);
+                    [p[0], p[1], p[2].max(s - doc)]
+                })
+                .collect()
+        };
+        let (m0, at0) = (b.moves.len(), b.at);
+        rough::emit_level(b, &lv, &link);
+        let cut_now = stock_left(design, &b.moves[m0..], at0, dc.cutter());
+        stock
+            .z_mm
+            .iter_mut()
+            .zip(&cut_now.z_mm)
+            .for_each(|(a, c)| *a = a.min(*c));
+        levels += 1;
+    }
+}
+
+/// The final finishing raster at the CL surface.
 fn finishing(
     b: &mut Builder,
     design: &raster::RotatedDesign,
@@ -354,8 +476,8 @@ fn finishing(
             continue;
         }
         let pts: Vec<P3> = match strategy {
-            Strategy::Zigzag if k % 2 == 1 => pass.iter().rev().copied().collect(),
-            Strategy::Zigzag => pass.clone(),
+            Strategy::Zigzag | Strategy::Auto if k % 2 == 1 => pass.iter().rev().copied().collect(),
+            Strategy::Zigzag | Strategy::Auto => pass.clone(),
             // one-way passes run in −u so that the uncut side (+v) is on the right: climb for M3
             Strategy::Oneway => pass.iter().rev().copied().collect(),
         };
@@ -369,15 +491,10 @@ fn finishing(
         b.path(&pts[1..], feed);
         if strategy == Strategy::Oneway {
             let up = [b.at[0], b.at[1], LEAD_MM.max(b.at[2])];
-            let f = b.plunge;
+            let f = b.machine.limits.max_feed_z_mm_min;
             b.feed(up, f);
         }
     }
-    let up = [b.at[0], b.at[1], LEAD_MM.max(b.at[2])];
-    let f = b.plunge;
-    b.feed(up, f);
-    b.rapid([b.at[0], b.at[1], b.safe_z]);
-    b.moves.push(Move::SpindleOff);
 }
 
 /// Build the program for `tile` (periodic, repeated over the area) on `machine`.
@@ -388,6 +505,7 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         area: (ax, ay),
         stepover,
         feed,
+        strategy,
     } = plan(cfg, tile, machine)?;
     let r = tool.radius_mm();
     let cut = tool.cutting(cfg.stock);
@@ -396,72 +514,112 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
     let design = raster::RotatedDesign::new(tile, (ax, ay), cfg.angle_deg, margin);
     let tol = cfg.tolerance_um * 1e-3;
     let dc = design.cutter(tool.shape);
-    let (passes, depth, checked_points, max_gouge) = finishing_passes(&design, &dc, stepover, tol);
+    let (vmin, vmax) = design.v_range();
+    let vs = raster::pass_positions(vmin, vmax, stepover);
+    let raw = cl_rows(&design, &dc, &vs);
+    let depth = -raw.iter().flatten().map(|p| p[2]).fold(f64::INFINITY, f64::min);
 
-    let mut b = Builder {
-        moves: vec![],
-        at: [0.0, 0.0, machine.program.safe_z_mm],
-        safe_z: machine.program.safe_z_mm,
-        plunge: cut.plunge_mm_min,
-        max_feed_z: machine.limits.max_feed_z_mm_min,
+    // roughing whenever the finishing tool could not take the depth in one cut; the allowance is half the
+    // finishing tool's depth of cut (at most a third of the roughing tool's)
+    let rough_needed = depth > cut.max_depth_of_cut_mm + 1e-9;
+    let leave = (0.5 * cut.max_depth_of_cut_mm).min(rough_cut.max_depth_of_cut_mm / 3.0);
+    let rshape = rough.shape.normalized();
+    let rdc = design.cutter(rshape);
+    let rp = rough_needed.then(|| rough::plan(&design, &rdc, rshape, rough_cut.max_depth_of_cut_mm, leave));
+    let layers = rp.as_ref().map_or(0, |p| p.layers);
+    let start = [0.0, 0.0, machine.program.clearance_z()];
+    let mut b = Builder::new(machine, start);
+    let mut tool_changes = 0usize;
+    if let Some(rp) = rp.as_ref().filter(|p| p.layers > 0) {
+        b.start_tool(rough, rough_cut);
+        tool_changes += 1;
+        let link = |a: P3, e: P3, zl: f64| link_points(&design, &rdc, a, e, |z| (z + leave).max(zl));
+        rough::emit(
+            &mut b,
+            rp,
+            rough_cut,
+            rough.diameter_mm(),
+            design.hf.pitch_mm,
+            tol,
+            &link,
+        );
+        if rough.id != tool.id {
+            b.stop_tool();
+        }
+    }
+    if tool_changes == 0 || rough.id != tool.id {
+        b.start_tool(tool, cut);
+        tool_changes += 1;
+    }
+    let mut stock = if layers > 0 {
+        stock_left(&design, &b.moves, start, rshape)
+    } else {
+        Heightfield::flat(design.hf.nx, design.hf.ny, design.hf.pitch_mm, false, 0.0)
     };
-    let start = b.at;
-    b.moves
-        .push(Move::SpindleOn(cut.spindle_rpm.max(rough_cut.spindle_rpm)));
-    b.moves.push(Move::Dwell(machine.program.spindle_dwell_s));
-    b.rapid(start);
-    let layers = roughing(&mut b, &design, rough, rough_cut, depth, tol);
-    finishing(&mut b, &design, &dc, &passes, cfg.strategy, feed, tol);
+    let levels = intermediate_levels(
+        &mut b,
+        &design,
+        &dc,
+        &mut stock,
+        &vs,
+        &raw,
+        cut.max_depth_of_cut_mm,
+        stepover,
+        feed,
+        tol,
+    )?;
+    drop(stock);
+    let passes: Vec<Vec<P3>> = raw.par_iter().map(|pts| simplify::simplify(pts, tol)).collect();
+    let (checked_points, max_gouge) = gouge_check(&design, &dc, &passes);
+    finishing(&mut b, &design, &dc, &passes, strategy, feed, tol);
+    b.stop_tool();
     let moves = b.moves;
 
     check::check(&moves, start, machine, rough).map_err(ToolpathError::Machine)?;
     check::check(&moves, start, machine, tool).map_err(ToolpathError::Machine)?;
-    let est = estimate::estimate_s(&moves, start, machine);
+    let est = estimate::estimate(&moves, start, machine, machine.block_rate_limit());
     let len = moves::lengths(&moves, start);
     let (lo, hi) = moves::bounds(&moves, start);
     let scallop = raster::scallop_for_stepover(r, stepover) * 1000.0;
-    let header = vec![
-        format!("brdfmill {} - {}", env!("CARGO_PKG_VERSION"), cfg.job),
-        format!("machine: {} [{:?}]", machine.name, machine.dialect),
-        format!(
-            "tool: {} {:?} D{} mm, stock {:?}",
-            tool.id,
-            tool.shape.kind(),
-            tool.diameter_mm(),
-            cfg.stock
-        ),
-        format!(
-            "finishing: stepover {:.4} mm, scallop {scallop:.3} um, angle {} deg, {:?}",
-            stepover, cfg.angle_deg, cfg.strategy
-        ),
-        format!(
-            "feed {feed} mm/min, plunge {} mm/min, spindle {} rpm",
-            cut.plunge_mm_min, cut.spindle_rpm
-        ),
-        format!(
-            "roughing: {layers} layers with {} at {} mm depth of cut",
-            rough.id, rough_cut.max_depth_of_cut_mm
-        ),
-        format!("area {ax} x {ay} mm, origin at its lower-left corner, Z0 = stock top"),
-        format!(
-            "design depth {depth:.4} mm, simplification tolerance {} um [one-sided]",
-            cfg.tolerance_um
-        ),
-        format!(
-            "estimated run time {} [feeds, acceleration, junction deviation]",
-            hms(est)
-        ),
-    ];
-    let gcode = emit::emit(machine.dialect, &header, machine.limits.path_tolerance_mm, &moves);
+    let facts = HeaderFacts {
+        tool,
+        rough,
+        cfg,
+        machine,
+        stepover,
+        scallop,
+        strategy,
+        feed,
+        layers,
+        levels,
+        depth,
+        area: (ax, ay),
+        est: &est,
+    };
+    let header = header(&facts);
+    let setup = emit::Setup {
+        dialect: machine.dialect,
+        header: &header,
+        path_tolerance_mm: machine.limits.path_tolerance_mm,
+        resolution_mm: machine.limits.resolution_mm,
+    };
+    let gcode = emit::emit(&setup, &moves);
     let summary = Summary {
         lines: gcode.lines().count(),
+        blocks: est.blocks,
+        peak_blocks_s: est.peak_blocks_s,
+        max_blocks_s: machine.block_rate_limit(),
         feed_length_mm: len.feed_mm,
         rapid_length_mm: len.rapid_mm,
-        estimated_s: est,
+        estimated_s: est.block_limited_s,
+        estimated_unlimited_s: est.s,
         stepover_mm: stepover,
         scallop_um: scallop,
         finishing_passes: passes.len(),
+        finishing_levels: levels,
         roughing_layers: layers,
+        roughing_tool: if layers > 0 { rough.id.clone() } else { String::new() },
+        tool_changes: tool_changes.saturating_sub(1),
         depth_mm: depth,
         extents_mm: [lo, hi],
         checked_points,
@@ -470,6 +628,80 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         spindle_rpm: cut.spindle_rpm,
     };
     Ok(Toolpath { moves, gcode, summary })
+}
+
+/// What the header states.
+struct HeaderFacts<'a> {
+    tool: &'a Tool,
+    rough: &'a Tool,
+    cfg: &'a ToolpathConfig,
+    machine: &'a Machine,
+    stepover: f64,
+    scallop: f64,
+    strategy: Strategy,
+    feed: f64,
+    layers: usize,
+    levels: usize,
+    depth: f64,
+    area: (f64, f64),
+    est: &'a estimate::Estimate,
+}
+
+/// The header comment lines (made safe by the emitter).
+fn header(f: &HeaderFacts) -> Vec<String> {
+    let (cfg, tool, rough) = (f.cfg, f.tool, f.rough);
+    let cut = tool.cutting(cfg.stock);
+    let rc = rough.cutting(cfg.stock);
+    let chip_um = 1000.0 * f.feed / (cut.spindle_rpm * tool.flutes as f64);
+    let mut h = vec![
+        format!("brdfmill {} - {}", env!("CARGO_PKG_VERSION"), cfg.job),
+        format!("machine: {} ({:?})", f.machine.name, f.machine.dialect),
+        format!(
+            "finish T{} {}: {} D{} mm, stock {:?}",
+            tool.number,
+            tool.id,
+            tool.shape.kind(),
+            tool.diameter_mm(),
+            cfg.stock
+        ),
+        format!(
+            "finish: stepover {:.4} mm, scallop {:.3} um, angle {} deg, {:?}",
+            f.stepover, f.scallop, cfg.angle_deg, f.strategy
+        ),
+        format!(
+            "finish: F{} plunge {} S{} chip {chip_um:.2} um/tooth, doc {} mm, {} extra levels",
+            f.feed, cut.plunge_mm_min, cut.spindle_rpm, cut.max_depth_of_cut_mm, f.levels
+        ),
+    ];
+    if f.layers > 0 {
+        h.push(format!(
+            "rough T{} {}: {} D{} mm, {} layers of {} mm, F{} plunge {} S{}",
+            rough.number,
+            rough.id,
+            rough.shape.kind(),
+            rough.diameter_mm(),
+            f.layers,
+            rc.max_depth_of_cut_mm,
+            rc.feed_mm_min,
+            rc.plunge_mm_min,
+            rc.spindle_rpm
+        ));
+    }
+    h.push(format!(
+        "area {} x {} mm, origin at its lower-left corner, Z0 = stock top",
+        f.area.0, f.area.1
+    ));
+    h.push(format!(
+        "design depth {:.4} mm, simplification tolerance {} um (one-sided)",
+        f.depth, cfg.tolerance_um
+    ));
+    h.push(format!(
+        "estimated run time {} ({} at the planner's block rate), {} blocks",
+        hms(f.est.s),
+        hms(f.est.block_limited_s),
+        f.est.blocks
+    ));
+    h
 }
 
 /// Points along the straight link from `a` to `b` every pitch, at the CL surface mapped by `zmap`, ending at

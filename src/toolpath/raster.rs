@@ -45,8 +45,10 @@ impl RotatedDesign {
         // grid edges on multiples of the pitch, so 0° lands exactly on the tile's samples
         let u0 = ((umin - margin_mm) / p).floor() * p;
         let v0 = ((vmin - margin_mm) / p).floor() * p;
-        let nu = ((umax + margin_mm - u0) / p).ceil() as usize + 1;
-        let nv = ((vmax + margin_mm - v0) / p).ceil() as usize + 1;
+        // the caller bounds the cells (`toolpath::MAX_GRID_CELLS`); at least one cell either way, so a
+        // degenerate size never reaches `par_chunks_mut(0)`
+        let nu = (((umax + margin_mm - u0) / p).ceil() as usize).saturating_add(1).max(1);
+        let nv = (((vmax + margin_mm - v0) / p).ceil() as usize).saturating_add(1).max(1);
         let mut hf = Heightfield::flat(nu, nv, p, false, 0.0);
         hf.z_mm.par_chunks_mut(nu).enumerate().for_each(|(j, row)| {
             let v = v0 + (j as f64 + 0.5) * p;
@@ -69,6 +71,17 @@ impl RotatedDesign {
     #[inline]
     pub fn to_xy(&self, u: f64, v: f64) -> (f64, f64) {
         (u * self.cos - v * self.sin, u * self.sin + v * self.cos)
+    }
+
+    /// `(u, v)` of a work point.
+    #[inline]
+    pub fn to_uv(&self, x: f64, y: f64) -> (f64, f64) {
+        (x * self.cos + y * self.sin, -x * self.sin + y * self.cos)
+    }
+
+    /// `(cos θ, sin θ)` of the raster angle.
+    pub fn cos_sin(&self) -> (f64, f64) {
+        (self.cos, self.sin)
     }
 
     /// `(v_min, v_max)` of the area.

@@ -13,6 +13,10 @@ use crate::stream::program::{self, Distance, Modal, MotionMode, Spindle, Units, 
 
 /// The modal group of G90.1/G91.1 (GRBL's `MODAL_GROUP_G4`; the other ids here are GRBL's group numbers).
 const GROUP_ARC_DISTANCE: u8 = 104;
+/// G modal group 7 (cutter radius compensation), numbered apart from the M groups.
+const GROUP_CUTTER_COMP: u8 = 107;
+/// G modal group 8 (tool length offset), numbered apart from the M groups.
+const GROUP_TOOL_LENGTH: u8 = 108;
 
 /// A block's words sorted by what they do, with the modal changes they make already applied to a copy of
 /// the parser's modal state (GRBL's steps 1–2: parse, and check each word on its own).
@@ -109,7 +113,11 @@ impl Parsed {
             (91, 1) => self.group(GROUP_ARC_DISTANCE)?,
             (90, 1) => return Err(20),
             (54, 0) => self.group(12)?,
-            (10 | 28 | 30 | 53 | 92 | 38 | 43 | 49 | 61 | 93 | 55..=59, _) => {
+            // G40 is GRBL's only cutter-compensation mode and G49 cancels a tool-length offset the emulator
+            // never applies: accepted, as GRBL 1.1 accepts them (a machinist's safety line carries both)
+            (40, 0) => self.group(GROUP_CUTTER_COMP)?,
+            (49, 0) => self.group(GROUP_TOOL_LENGTH)?,
+            (10 | 28 | 30 | 53 | 92 | 38 | 43 | 61 | 93 | 55..=59, _) => {
                 self.unmodelled = Some(format!("G{v}"));
             }
             (_, 0) => return Err(20),

@@ -37,6 +37,10 @@ fn answers_like_grbl() {
     );
     assert_eq!(send(&mut c, "G90.1\n"), "error:20\r\n");
     assert_eq!(send(&mut c, "M7\n"), "error:20\r\n", "no ENABLE_M7 on a default build");
+    // the machinist's safety line, and its cutter-compensation word beside a spindle word (G and M groups
+    // are numbered apart)
+    assert_eq!(send(&mut c, "G17G21G40G49G54G80G90G94\n"), "ok\r\n");
+    assert_eq!(send(&mut c, "G40M5\n"), "ok\r\n");
     assert_eq!(send(&mut c, "$Z\n"), "error:2\r\n");
     assert_eq!(send(&mut c, "G0X1X2\n"), "error:25\r\n");
     assert_eq!(send(&mut c, "G1X1F100 (comment) ; tail\n"), "ok\r\n");

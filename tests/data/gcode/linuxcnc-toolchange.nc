@@ -1,0 +1,12 @@
+Z0.5 F1000
+G0 Z25
+M5
+M9
+(tool T1: ball D1 mm)
+T1 M6
+G43 H1
+G0 Z25
+X1.91 Y3.75
+M3 S10000
+G4 P2
+M7
