@@ -197,20 +197,42 @@ fn png_uri(c: &Canvas) -> String {
     )
 }
 
-/// Run the analysis of `input` and write every artifact into `out`.
-pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeError> {
-    let (mut hf, valid, missing, mut warnings) = load(input, cfg)?;
-    let bad = |message: String| AnalyzeError::Input {
-        path: input.to_path_buf(),
-        message,
-    };
-    // one central difference needs three points per axis; anything larger analyses
-    if hf.nx < 3 || hf.ny < 3 {
-        return Err(bad(format!(
-            "{}×{} points: a slope needs at least 3×3 points",
-            hf.nx, hf.ny
-        )));
+/// The analysis's notes: the reader's warnings, the plane removed, the missing points, the wave resampling.
+fn notes(
+    warnings: &[String],
+    tilt: [f64; 2],
+    missing: usize,
+    hf: &Heightfield,
+    wcfg: &WaveConfig,
+    windows: usize,
+) -> Vec<String> {
+    let mut notes: Vec<String> = warnings.iter().map(|w| format!("Warning: {w}.")).collect();
+    notes.push(format!(
+        "Mean plane removed: slopes {:.5}, {:.5} ({:.3}°).",
+        tilt[0],
+        tilt[1],
+        tilt[0].hypot(tilt[1]).atan().to_degrees()
+    ));
+    if missing > 0 {
+        notes.push(format!(
+            "{missing} missing points: slopes skip every difference touching one; the wave optics see them \
+             filled by iterated averaging of valid neighbours."
+        ));
     }
+    notes.push(format!(
+        "Wave optics: the heightfield is resampled (bicubic Catmull–Rom) from {:.3} µm to {:.4} µm (λ/4); {} \
+         coherence windows of σ = {} µm at normal incidence.",
+        hf.pitch_mm * 1e3,
+        wcfg.sample(),
+        windows,
+        wcfg.sigma_um
+    ));
+    notes
+}
+
+/// What the wave optics can resolve of a surface this small or this coarse.
+fn resolution_warnings(hf: &Heightfield, cfg: &Config) -> Vec<String> {
+    let mut warnings = Vec::new();
     let side_um = (hf.nx.min(hf.ny) as f64) * hf.pitch_mm * 1e3;
     if side_um < 8.0 * cfg.sigma_um {
         warnings.push(format!(
@@ -225,6 +247,24 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
             cfg.sigma_um
         ));
     }
+    warnings
+}
+
+/// Run the analysis of `input` and write every artifact into `out`.
+pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeError> {
+    let (mut hf, valid, missing, mut warnings) = load(input, cfg)?;
+    let bad = |message: String| AnalyzeError::Input {
+        path: input.to_path_buf(),
+        message,
+    };
+    // one central difference needs three points per axis; anything larger analyses
+    if hf.nx < 3 || hf.ny < 3 {
+        return Err(bad(format!(
+            "{}×{} points: a slope needs at least 3×3 points",
+            hf.nx, hf.ny
+        )));
+    }
+    warnings.extend(resolution_warnings(&hf, cfg));
     let tilt = remove_plane(&mut hf.z_mm, &valid, hf.nx, hf.pitch_mm);
     let n_valid = valid.iter().filter(|v| **v).count().max(1);
     let rms = (hf
@@ -302,27 +342,7 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
     let slices_png = wave_vs_geometric_png(&slice, &geo, &wi, max_slope);
     let surface_png = hf.relief_png("surface (mean plane removed, missing points filled)", 900);
 
-    let mut notes: Vec<String> = warnings.iter().map(|w| format!("Warning: {w}.")).collect();
-    notes.push(format!(
-        "Mean plane removed: slopes {:.5}, {:.5} ({:.3}°).",
-        tilt[0],
-        tilt[1],
-        tilt[0].hypot(tilt[1]).atan().to_degrees()
-    ));
-    if missing > 0 {
-        notes.push(format!(
-            "{missing} missing points: slopes skip every difference touching one; the wave optics see them \
-             filled by iterated averaging of valid neighbours."
-        ));
-    }
-    notes.push(format!(
-        "Wave optics: the heightfield is resampled (bicubic Catmull–Rom) from {:.3} µm to {:.4} µm (λ/4); {} \
-         coherence windows of σ = {} µm at normal incidence.",
-        hf.pitch_mm * 1e3,
-        wcfg.sample(),
-        slice.windows,
-        wcfg.sigma_um
-    ));
+    let notes = notes(&warnings, tilt, missing, &hf, &wcfg, slice.windows);
     let analysis = Analysis {
         version: 1,
         source: input.display().to_string(),
