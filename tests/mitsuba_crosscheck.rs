@@ -6,7 +6,7 @@
 //! but G, and (b) the exact form differs from Mitsuba by less than 1% (the fit's documented error).
 
 use brdfmill::brdf::fresnel::fresnel_conductor;
-use brdfmill::brdf::{Brdf, Microfacet, Shape};
+use brdfmill::brdf::{Brdf, Family, Microfacet};
 use brdfmill::geometry::{half_vector, Vec3};
 
 struct Row {
@@ -79,7 +79,7 @@ fn agrees_with_mitsuba_roughconductor() {
                 "ggx" => ggx_max = ggx_max.max(rel_err(ours, r.value[c])),
                 _ => {
                     beck_exact_max = beck_exact_max.max(rel_err(ours, r.value[c]));
-                    let m = Microfacet::new(Shape::Beckmann, r.au, r.av).unwrap();
+                    let m = Microfacet::new(Family::Beckmann, r.au, r.av).unwrap();
                     let h = half_vector(&r.wi, &r.wo).unwrap();
                     let g = beckmann_g1_rational(&m, &r.wi, &h) * beckmann_g1_rational(&m, &r.wo, &h);
                     let fr = fresnel_conductor(r.wi.dot(&h), r.eta[c], r.k[c]);

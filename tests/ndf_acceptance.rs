@@ -1,7 +1,7 @@
 //! The NDF stage's acceptance figures (issue "Foundation …"), each against an independent truth:
 //! closed-form slope variances, the analytic P22, and a MERL file written from a model and read back.
 
-use brdfmill::brdf::{Brdf, Merl, Microfacet, Shape};
+use brdfmill::brdf::{Brdf, Family, Merl, Microfacet};
 use brdfmill::ndf::{self, NdfConfig, StoppedBy};
 use brdfmill::slope::SlopeGrid;
 
@@ -47,7 +47,7 @@ fn analytic_on_grid(m: &Microfacet, like: &SlopeGrid) -> SlopeGrid {
 #[test]
 fn anisotropic_ggx_recovers_the_analytic_p22() {
     let n = ndf::run(&NdfConfig::default(), &Brdf::parse("ggx:ax=0.1,ay=0.3").unwrap(), None).unwrap();
-    let m = Microfacet::new(Shape::Ggx, 0.1, 0.3).unwrap();
+    let m = Microfacet::new(Family::Ggx, 0.1, 0.3).unwrap();
     // Both normalised over the grid: the tail beyond tan 60° is not part of the target.
     let l1 = n.target.relative_l1(&analytic_on_grid(&m, &n.target));
     println!("ggx ax=0.1 ay=0.3: relative L1 {l1:.5}");
@@ -65,7 +65,7 @@ fn merl_file_from_a_model_gives_the_model_ndf() {
     let measured = Brdf::parse(&format!("merl:{}", path.display())).unwrap();
     let cfg = NdfConfig::default();
     let from_file = ndf::run(&cfg, &measured, None).unwrap();
-    let m = Microfacet::new(Shape::Beckmann, 0.2, 0.2).unwrap();
+    let m = Microfacet::new(Family::Beckmann, 0.2, 0.2).unwrap();
     let l1 = from_file.target.relative_l1(&analytic_on_grid(&m, &from_file.target));
     let from_model = ndf::run(&cfg, &brdf, None).unwrap();
     let l1_model = from_file.target.relative_l1(&from_model.target);

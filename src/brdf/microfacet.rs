@@ -10,10 +10,10 @@ use crate::geometry::{cos_sin_phi, tan2_theta, Vec3};
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
-/// The shape of a microfacet distribution.
+/// The family of a microfacet distribution (the shape of its slope density).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
-pub enum Shape {
+pub enum Family {
     /// Gaussian slopes (Beckmann 1963).
     Beckmann,
     /// Trowbridge–Reitz / GGX (Walter et al. 2007).
@@ -24,7 +24,7 @@ pub enum Shape {
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Microfacet {
     /// Beckmann or GGX.
-    pub shape: Shape,
+    pub shape: Family,
     /// Roughness along x (dimensionless; the slope standard deviation along x is `αx/√2` for Beckmann).
     pub alpha_x: f64,
     /// Roughness along y.
@@ -33,7 +33,7 @@ pub struct Microfacet {
 
 impl Microfacet {
     /// A distribution; `None` unless both roughnesses are finite and positive.
-    pub fn new(shape: Shape, alpha_x: f64, alpha_y: f64) -> Option<Self> {
+    pub fn new(shape: Family, alpha_x: f64, alpha_y: f64) -> Option<Self> {
         let ok = |a: f64| a.is_finite() && a > 0.0;
         (ok(alpha_x) && ok(alpha_y)).then_some(Self {
             shape,
@@ -64,8 +64,8 @@ impl Microfacet {
         let e = self.stretched_tan2(wm);
         let norm = PI * self.alpha_x * self.alpha_y * cos4;
         match self.shape {
-            Shape::Beckmann => (-e).exp() / norm,
-            Shape::Ggx => 1.0 / (norm * (1.0 + e) * (1.0 + e)),
+            Family::Beckmann => (-e).exp() / norm,
+            Family::Ggx => 1.0 / (norm * (1.0 + e) * (1.0 + e)),
         }
     }
 
@@ -74,8 +74,8 @@ impl Microfacet {
         let e = (p / self.alpha_x).powi(2) + (q / self.alpha_y).powi(2);
         let norm = PI * self.alpha_x * self.alpha_y;
         match self.shape {
-            Shape::Beckmann => (-e).exp() / norm,
-            Shape::Ggx => 1.0 / (norm * (1.0 + e) * (1.0 + e)),
+            Family::Beckmann => (-e).exp() / norm,
+            Family::Ggx => 1.0 / (norm * (1.0 + e) * (1.0 + e)),
         }
     }
 
@@ -98,8 +98,8 @@ impl Microfacet {
         }
         let alpha = self.alpha_along(w);
         match self.shape {
-            Shape::Ggx => ((1.0 + alpha * alpha * t2).sqrt() - 1.0) / 2.0,
-            Shape::Beckmann => {
+            Family::Ggx => ((1.0 + alpha * alpha * t2).sqrt() - 1.0) / 2.0,
+            Family::Beckmann => {
                 let a = 1.0 / (alpha * t2.sqrt());
                 (libm::erf(a) - 1.0) / 2.0 + (-a * a).exp() / (2.0 * a * PI.sqrt())
             }
@@ -140,7 +140,7 @@ impl BlinnPhong {
     pub fn smith_proxy(&self) -> Microfacet {
         let a = Microfacet::blinn_equivalent_alpha(self.exponent);
         Microfacet {
-            shape: Shape::Beckmann,
+            shape: Family::Beckmann,
             alpha_x: a,
             alpha_y: a,
         }
@@ -169,7 +169,7 @@ mod tests {
 
     #[test]
     fn ndfs_are_normalised_by_projected_area() {
-        for shape in [Shape::Beckmann, Shape::Ggx] {
+        for shape in [Family::Beckmann, Family::Ggx] {
             for (ax, ay) in [(0.1, 0.1), (0.3, 0.3), (0.1, 0.3), (0.6, 0.25)] {
                 let m = Microfacet::new(shape, ax, ay).unwrap();
                 let i = projected_integral(|w| m.d(w));
@@ -187,7 +187,7 @@ mod tests {
     fn smith_lambda_satisfies_the_projected_area_identity() {
         // ∫ ⟨w, m⟩ D(m) dm = cosθ (the signed projected area of the microsurface equals the macrosurface's),
         // and ∫ ⟨w, m⟩⁺ D(m) dm = cosθ (1 + Λ(w)).
-        for shape in [Shape::Beckmann, Shape::Ggx] {
+        for shape in [Family::Beckmann, Family::Ggx] {
             let m = Microfacet::new(shape, 0.5, 0.2).unwrap();
             for (th, ph) in [(0.5, 0.3), (1.1, 1.9), (1.35, -0.4)] {
                 let w = spherical(th, ph);
@@ -204,7 +204,7 @@ mod tests {
     proptest! {
         #[test]
         fn p22_is_d_times_cos4(p in -3.0..3.0f64, q in -3.0..3.0f64, ax in 0.05..1.0f64, ay in 0.05..1.0f64) {
-            for shape in [Shape::Beckmann, Shape::Ggx] {
+            for shape in [Family::Beckmann, Family::Ggx] {
                 let m = Microfacet::new(shape, ax, ay).unwrap();
                 let wm = slope_to_normal(p, q);
                 let a = m.p22(p, q);
@@ -215,7 +215,7 @@ mod tests {
 
         #[test]
         fn masking_is_a_fraction(th in 0.0..1.55f64, ph in -3.1..3.1f64, ax in 0.05..1.0f64, ay in 0.05..1.0f64) {
-            for shape in [Shape::Beckmann, Shape::Ggx] {
+            for shape in [Family::Beckmann, Family::Ggx] {
                 let m = Microfacet::new(shape, ax, ay).unwrap();
                 let w = spherical(th, ph);
                 let g = m.g1(&w, &Vec3::z());
@@ -226,8 +226,8 @@ mod tests {
 
     #[test]
     fn invalid_roughness_is_refused() {
-        assert!(Microfacet::new(Shape::Ggx, 0.0, 0.1).is_none());
-        assert!(Microfacet::new(Shape::Beckmann, f64::NAN, 0.1).is_none());
-        assert!(Microfacet::new(Shape::Beckmann, -0.2, 0.1).is_none());
+        assert!(Microfacet::new(Family::Ggx, 0.0, 0.1).is_none());
+        assert!(Microfacet::new(Family::Beckmann, f64::NAN, 0.1).is_none());
+        assert!(Microfacet::new(Family::Beckmann, -0.2, 0.1).is_none());
     }
 }

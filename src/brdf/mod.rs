@@ -24,7 +24,7 @@ pub(crate) mod tabulated;
 
 pub use fresnel::{ConductorIor, PRESETS};
 pub use merl::Merl;
-pub use microfacet::{BlinnPhong, Microfacet, Shape};
+pub use microfacet::{BlinnPhong, Family, Microfacet};
 pub use rgl::RglBsdf;
 pub use tabulated::TabulatedNdf;
 

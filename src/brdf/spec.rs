@@ -1,6 +1,6 @@
 //! Parsing of BRDF spec strings (`ggx:ax=0.1,ay=0.3,material=gold`, `merl:PATH`, …).
 
-use super::{BlinnPhong, Brdf, BrdfError, ConductorIor, Microfacet, Model, Shape, Ward, PRESETS};
+use super::{BlinnPhong, Brdf, BrdfError, ConductorIor, Family, Microfacet, Model, Ward, PRESETS};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -63,7 +63,7 @@ pub(super) fn parse(spec: &str) -> Result<Brdf, BrdfError> {
     };
     let model = match kind.as_str() {
         "beckmann" | "ggx" | "ward" => {
-            let shape = if kind == "ggx" { Shape::Ggx } else { Shape::Beckmann };
+            let shape = if kind == "ggx" { Family::Ggx } else { Family::Beckmann };
             let alpha = positive(&mut params, "alpha")?;
             let ax = positive(&mut params, "ax")?;
             let ay = positive(&mut params, "ay")?;

@@ -250,7 +250,7 @@ mod tests {
     use crate::geometry::spherical;
 
     fn beckmann_csv(alpha: f64, nphi: usize) -> String {
-        let m = Microfacet::new(crate::brdf::Shape::Beckmann, alpha, alpha).unwrap();
+        let m = Microfacet::new(crate::brdf::Family::Beckmann, alpha, alpha).unwrap();
         let mut s = String::from("theta_h_deg,phi_h_deg,value\n");
         for it in 0..=180 {
             let th = it as f64 * 0.5;
@@ -267,7 +267,7 @@ mod tests {
     #[test]
     fn isotropic_table_reproduces_the_normalised_ndf() {
         let t = TabulatedNdf::parse(&beckmann_csv(0.3, 1)).unwrap();
-        let m = Microfacet::new(crate::brdf::Shape::Beckmann, 0.3, 0.3).unwrap();
+        let m = Microfacet::new(crate::brdf::Family::Beckmann, 0.3, 0.3).unwrap();
         for th in [0.0f64, 0.1, 0.3, 0.6] {
             let w = spherical(th, 1.0);
             let (a, b) = (t.d(&w), m.d(&w));

@@ -169,7 +169,7 @@ impl MicrofacetBrdf {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::brdf::{Microfacet, Shape};
+    use crate::brdf::{Family, Microfacet};
     use rand::{Rng, SeedableRng};
 
     #[test]
@@ -204,7 +204,7 @@ mod tests {
             .collect();
         let domain = SlopeDomain::square(64, 1.2);
         let (g, _) = ndf_of_slopes(&s, domain);
-        let m = Microfacet::new(Shape::Beckmann, sigma * 2f64.sqrt(), sigma * 2f64.sqrt()).unwrap();
+        let m = Microfacet::new(Family::Beckmann, sigma * 2f64.sqrt(), sigma * 2f64.sqrt()).unwrap();
         let mut exact = SlopeGrid::from_fn(domain, |p, q| m.p22(p, q));
         exact.normalise();
         let l1 = g.relative_l1(&exact);
