@@ -607,24 +607,6 @@ mod tests {
     use super::*;
 
     #[test]
-    fn tool_specs() {
-        assert_eq!(Shape::parse("ball:1.0").unwrap(), Shape::Ball { diameter_mm: 1.0 });
-        assert_eq!(Shape::parse("flat:3").unwrap(), Shape::Flat { diameter_mm: 3.0 });
-        assert_eq!(
-            Shape::parse("bull:6:0.5").unwrap(),
-            Shape::Bull {
-                diameter_mm: 6.0,
-                corner_radius_mm: 0.5
-            }
-        );
-        for bad in ["ball", "ball:x", "ball:-1", "bull:2:1.5", "cone:1", "flat:1:2", ""] {
-            assert!(Shape::parse(bad).is_err(), "{bad}");
-        }
-        let t = Shape::parse("bull:6:0.5").unwrap();
-        assert_eq!(Shape::parse(&t.to_string()).unwrap(), t);
-    }
-
-    #[test]
     fn limits_are_refused_with_a_message() {
         let prog = "G0 X0 Y0 Z1\nG1 Z-1 F100\nX100 Y100\n";
         let cfg = SimulateConfig {
