@@ -49,9 +49,10 @@ fn emulator_for(build: Build, baud: u32, time_scale: f64, faults: Vec<Fault>) ->
 fn test_config() -> Config {
     Config {
         spindle_dwell_s: 0.1,
-        // shorter than the 5 s default so silence faults resolve quickly, yet ten status periods (200 ms) even
-        // on a loaded 2-core machine, where 600 ms of scheduling delay was seen
-        silence_timeout: Duration::from_millis(2000),
+        // shorter than the 5 s default so silence faults resolve quickly, yet over seven status periods
+        // (200 ms): 600 ms of scheduling delay was seen on a loaded 2-core machine. The silence trials mute
+        // the controller for 32 s simulated = 4 s real at ×8, well beyond it.
+        silence_timeout: Duration::from_millis(1500),
         ..Config::default()
     }
 }
@@ -238,7 +239,7 @@ fn fault_trial(seed: u64) -> (Trial, Build, bool) {
     let kind = match trial {
         Trial::Error => Some(FaultKind::Error(20)),
         Trial::Alarm => Some(FaultKind::Alarm(2)),
-        Trial::Silence => Some(FaultKind::Silence(8_000)),
+        Trial::Silence => Some(FaultKind::Silence(32_000)),
         Trial::Disconnect => Some(FaultKind::Disconnect),
         Trial::ResetAfterHold => None,
     };
