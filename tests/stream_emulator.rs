@@ -361,21 +361,34 @@ fn injected_faults_then_resume_run_every_motion_line_exactly_once() {
     assert_eq!(results.len(), seeds.len());
 }
 
-/// Run `f` on a thread and fail if it does not finish in `limit`: a streamer that hangs fails the test
-/// instead of hanging it.
-fn within<T: Send + 'static>(limit: Duration, f: impl FnOnce() -> T + Send + 'static) -> T {
-    let (tx, rx) = std::sync::mpsc::channel();
-    std::thread::spawn(move || {
-        let _ = tx.send(f());
-    });
-    rx.recv_timeout(limit).expect("the streamer did not finish in time")
+/// Ends a run that would never end, from the protocol's own evidence rather than a clock: once every
+/// line is answered `ok` and the controller reports Idle, a streamer that still has not finished after this
+/// many further status reports never will (the end needs two consecutive Idle reports at the end point).
+const IDLE_REPORTS_AFTER_THE_LAST_OK: usize = 50;
+
+/// Sets `stop` after [`IDLE_REPORTS_AFTER_THE_LAST_OK`] Idle reports past the last `ok`, so a hung streamer
+/// returns `Stopped` and the test fails instead of hanging.
+struct HangGuard<'a> {
+    stop: &'a AtomicBool,
+    idle_after_last_ok: usize,
+}
+
+impl Observer for HangGuard<'_> {
+    fn progress(&mut self, p: &Progress) {
+        if p.lines_acked >= p.lines_total && p.state == Some(brdfmill::stream::protocol::MachineState::Idle) {
+            self.idle_after_last_ok += 1;
+            if self.idle_after_last_ok > IDLE_REPORTS_AFTER_THE_LAST_OK {
+                self.stop.store(true, Ordering::SeqCst);
+            }
+        }
+    }
 }
 
 /// Issue 14, row 1: a 12-line program on a stock build (`[OPT:V,15,128]`, `$10=1`: no `Ln`, no `Bf`)
 /// completes — the end is read from Idle at the end point — and nothing is changed on the controller.
 #[test]
 fn a_stock_build_completes_and_says_how_the_end_was_read() {
-    let out = within(Duration::from_secs(60), || {
+    let out = {
         let dir = tempfile::tempdir().unwrap();
         let mut text = String::from("G21G90\nG0X0Y0Z1\nG1Z-0.2F300\n");
         for i in 0..8 {
@@ -385,9 +398,15 @@ fn a_stock_build_completes_and_says_how_the_end_was_read() {
         let prog = program(dir.path(), "twelve.nc", &text);
         assert_eq!(prog.sendable().count(), 12);
         let emu = emulator_for(Build::Stock, 115_200, 20.0, vec![]);
-        let outcome = stream(&emu, 115_200, &prog, &dir.path().join("j"), Mode::Fresh);
+        let stop = AtomicBool::new(false);
+        let mut guard = HangGuard {
+            stop: &stop,
+            idle_after_last_ok: 0,
+        };
+        let journal = dir.path().join("j");
+        let outcome = stream_with(&emu, 115_200, &prog, &journal, Mode::Fresh, &mut guard, &stop);
         (outcome, emu.log())
-    });
+    };
     let (Outcome::Completed(stats), log) = out else {
         panic!("did not complete: {out:?}")
     };
