@@ -85,7 +85,7 @@ fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outc
             p.lines,
             brdfmill::toolpath::hms(p.estimated_s),
             p.depth_mm,
-            tools(t)
+            t.tools_in_order()
         );
     }
     let code = match &outcome.metrics {
@@ -106,15 +106,6 @@ fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outc
     }
     println!("total     {total_s:.1} s");
     code
-}
-
-/// The tools in the order the program uses them.
-fn tools(t: &brdfmill::toolpath::ToolpathConfig) -> String {
-    if t.rough_tool.is_empty() || t.rough_tool == t.tool {
-        t.tool.clone()
-    } else {
-        format!("{} (roughing), then {}", t.rough_tool, t.tool)
-    }
 }
 
 /// Print the figures and the verdict; the exit code.

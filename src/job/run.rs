@@ -195,7 +195,8 @@ pub fn run(
     let (tile, tile_png) = facets_stage(ready, &nd.ndf, &mut o)?;
     step(Stage::Facets, &mut timings, false);
     write_state(&mut o, &job.name, &timings, "running")?;
-    outcome.relief_mm = Some(tile.heightfield.range().1 - tile.heightfield.range().0);
+    let (lo, hi) = tile.heightfield.range();
+    outcome.relief_mm = Some(hi - lo);
     if until == Stage::Facets {
         return finish(o, timings, outcome);
     }

@@ -68,11 +68,7 @@ pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) 
 pub(super) fn program(ready: &Ready, s: &Summary, relief_mm: f64) -> Vec<(String, String)> {
     let job = &ready.job;
     let t = &job.toolpath;
-    let tools = if t.rough_tool.is_empty() || t.rough_tool == t.tool {
-        format!("`{}` for every pass", t.tool)
-    } else {
-        format!("`{}` (roughing), then `{}` (finishing)", t.rough_tool, t.tool)
-    };
+    let tools = t.tools_in_order();
     vec![
         ("program".into(), "program.nc (summary in program.json)".into()),
         ("estimated time".into(), toolpath::hms(s.estimated_s)),

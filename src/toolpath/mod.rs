@@ -85,6 +85,18 @@ impl Default for ToolpathConfig {
     }
 }
 
+impl ToolpathConfig {
+    /// The tools in the order the program uses them, for summaries: the finishing tool alone, or the
+    /// roughing tool then the finishing tool.
+    pub fn tools_in_order(&self) -> String {
+        if self.rough_tool.is_empty() || self.rough_tool == self.tool {
+            format!("`{}` for every pass", self.tool)
+        } else {
+            format!("`{}` (roughing), then `{}` (finishing)", self.rough_tool, self.tool)
+        }
+    }
+}
+
 /// Errors of the toolpath stage.
 #[derive(Debug, thiserror::Error)]
 pub enum ToolpathError {
