@@ -1,10 +1,10 @@
 //! Stage 3 — facets: a target NDF to a tileable heightfield (Section 7.2, Eqs. 17–21).
 //!
-//! 1. [`sampling`]: N = W×H facet slopes from the NDF — low-discrepancy importance samples, then Lloyd
+//! 1. `sampling`: N = W×H facet slopes from the NDF — low-discrepancy importance samples, then Lloyd
 //!    iterations toward a CVT (Voronoi cells from `spade`). Slopes steeper than the machinable limit are
 //!    dropped from the density (or clamped), and the mass that removed is reported.
-//! 2. [`arrange`]: the facets placed on a W×H cyclic grid by simulated annealing of `E = C + I + V`.
-//! 3. [`poisson`]: facet heights by periodic Poisson integration (FFT), then the facet planes rasterised at
+//! 2. `arrange`: the facets placed on a W×H cyclic grid by simulated annealing of `E = C + I + V`.
+//! 3. `poisson`: facet heights by periodic Poisson integration (FFT), then the facet planes rasterised at
 //!    a fine pitch into a periodic [`Heightfield`]; [`stl`] writes the exact faceted solid.
 //!
 //! ```

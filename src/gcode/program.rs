@@ -160,7 +160,7 @@ pub struct Program {
     pub fingerprint: u64,
 }
 
-/// A word of a block (the crate's one tokenizer, [`crate::gcode::lex`]).
+/// A word of a block (the crate's one tokenizer, `crate::gcode::lex`).
 pub use crate::gcode::lex::Word;
 
 /// Why a cleaned block could not be split into words; [`WordError::grbl_code`] gives GRBL's error code.

@@ -1,7 +1,7 @@
 //! Stage 2 — BRDF → target NDF (Section 7.1, DESIGN.md §2).
 //!
 //! 1. The BRDF's half-angle distribution on a slope grid ([`halfangle`]): the *observed* distribution `O`.
-//! 2. Lucy–Richardson deconvolution of the base material's own lobe `K` ([`deconvolve`]): the facet
+//! 2. Lucy–Richardson deconvolution of the base material's own lobe `K` (`deconvolve`): the facet
 //!    distribution that, blurred by the material, shows `O`.
 //! 3. The mean slope removed (Section 7.2: a tileable surface has zero mean slope), and reported.
 //!

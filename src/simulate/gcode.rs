@@ -110,7 +110,7 @@ pub struct Motion {
     /// Every motion as straight segments, in program order (zero-length moves dropped).
     pub segments: Vec<Segment>,
     /// The same motion (arcs as their chords) with feeds in mm/min, spindle and dwell commands, for
-    /// [`crate::toolpath::estimate::estimate_s`].
+    /// `crate::toolpath::estimate::estimate_s`.
     pub moves: Vec<Move>,
     /// Lines read (up to and including the end of the program).
     pub lines: usize,

@@ -2,15 +2,15 @@
 //!
 //! - [`gcode`]: the reader for the G-code subset of §5; what it does not understand is refused with line and
 //!   column. Arcs become chords within `arc_tolerance_um` (chord sagitta).
-//! - [`sweep`]: the lowest point of a ball, flat or bull bit swept along one straight segment, in closed form
+//! - `sweep`: the lowest point of a ball, flat or bull bit swept along one straight segment, in closed form
 //!   for ball and flat (a certified 1 pm bound for the bull).
-//! - [`stock`]: the stock heightfield in tiles, swept in parallel with rayon, each tile owned by one task.
+//! - `stock`: the stock heightfield in tiles, swept in parallel with rayon, each tile owned by one task.
 //! - [`deviation`](mod@deviation): the simulated surface against the design tile, and where the bit cannot reach.
 //!
 //! The stock is a non-periodic grid of `pitch_um` over the program's cutting extents plus the tool radius
 //! (or given bounds), flat at `stock_top_mm`; every segment lowers it to `min(stock, sweep)` at each cell
 //! centre, exactly for linear moves. The machining time comes from the toolpath stage's planner
-//! ([`crate::toolpath::estimate::estimate_s`]) with the limits of a machine profile — by default those of
+//! (`crate::toolpath::estimate::estimate_s`) with the limits of a machine profile — by default those of
 //! `machines/linuxcnc-mill.toml` (X/Y 500 mm/s², Z 300 mm/s², rapids 3000 / 1500 mm/min, junction deviation
 //! 0.001 mm), said in [`SimStats::machine`].
 //!
@@ -233,7 +233,7 @@ pub struct Simulation {
 }
 
 impl Simulation {
-    /// The surface of one tool's cut as a simulation of its own (for [`deviation`] per tool).
+    /// The surface of one tool's cut as a simulation of its own (for `deviation` per tool).
     pub fn of_tool(&self, cut: &ToolCut) -> Simulation {
         Simulation {
             heightfield: Heightfield {

@@ -331,7 +331,7 @@ fn field(field: impl Into<String>, expected: &str, value: impl std::fmt::Display
 /// G-code blocks (issue 13's `name = "evil\nG0 Z-40"`), a carriage return or a NUL confuses controllers.
 /// Refused rather than cleaned, because such a name is a typo or an attack and the user should see which
 /// field. Comment delimiters `( ) ;` are legitimate in a name ("router (GRBL 1.1)") and are made safe where
-/// comments are written ([`crate::gcode::emit::comment_text`]: `(` → `[`, `)` → `]`, `;` → `,`).
+/// comments are written (`crate::gcode::emit::comment_text`: `(` → `[`, `)` → `]`, `;` → `,`).
 pub fn program_text(name: &str, s: &str) -> Result<(), ProfileError> {
     if let Some(c) = s.chars().find(|c| c.is_control()) {
         return Err(field(

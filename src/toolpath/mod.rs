@@ -2,9 +2,9 @@
 //!
 //! - [`machine`]: versioned machine profiles (`machines/*.toml`) with their tools.
 //! - [`dropcutter`]: the exact cutter-location surface of a ball, flat or bull-nose bit ([`crate::tool::Shape`]) over a heightfield.
-//! - [`raster`]: raster passes at any angle over the tile repeated across the work area.
-//! - [`simplify`]: one-sided removal of collinear points within a stated tolerance.
-//! - [`check`], [`estimate`]: the machine check and the run-time estimate; the program is written by [`crate::gcode::emit`].
+//! - `raster`: raster passes at any angle over the tile repeated across the work area.
+//! - `simplify`: one-sided removal of collinear points within a stated tolerance.
+//! - [`check`], `estimate`: the machine check and the run-time estimate; the program is written by `crate::gcode::emit`.
 //!
 //! The program cuts roughing layers first when the design is deeper than the tool's depth of cut
 //! (z = max(layer, CL_rough + leave)), then the finishing raster at the stepover of the target scallop.

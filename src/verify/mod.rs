@@ -6,10 +6,10 @@
 //! is convolved only with the part of `K` that the simulation does not model (the material's own polish).
 //!
 //! - [`run`]: the stage's entry point, `run(&VerifyConfig, &VerifyInput) -> VerifyOutput`,
-//! - [`metrics`]: the figures and their tolerances (`metrics.json`),
-//! - [`explain`]: plain-word reasons for every failing figure,
-//! - [`render`]: sphere previews and BRDF slices,
-//! - [`report`]: the single-page offline HTML report.
+//! - `metrics`: the figures and their tolerances (`metrics.json`),
+//! - `explain`: plain-word reasons for every failing figure,
+//! - `render`: sphere previews and BRDF slices,
+//! - `report`: the single-page offline HTML report.
 
 pub(crate) mod explain;
 pub(crate) mod metrics;
