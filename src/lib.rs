@@ -25,6 +25,7 @@
 
 pub mod analyze;
 pub mod brdf;
+pub mod design;
 pub mod distance;
 pub mod facets;
 pub(crate) mod fft2;
@@ -33,6 +34,7 @@ pub mod geometry;
 pub mod heightfield;
 pub mod io;
 pub mod job;
+pub mod morphology;
 pub mod ndf;
 pub mod npy;
 pub mod optics;

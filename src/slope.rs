@@ -256,6 +256,22 @@ impl SlopeGrid {
         SlopeGrid::from_fn(self.domain, |p, q| self.sample(p + p0, q + q0))
     }
 
+    /// This density restricted to slopes no steeper than `cone_tan` (`|∇z| ≤ tan θ`), renormalised: the
+    /// part a tool whose steepest facet is `θ` can make.
+    pub fn within_cone(&self, cone_tan: f64) -> SlopeGrid {
+        let d = self.domain;
+        let mut out = self.clone();
+        for j in 0..d.ny {
+            for i in 0..d.nx {
+                if d.p_at(i).hypot(d.q_at(j)) > cone_tan {
+                    out.density[j * d.nx + i] = 0.0;
+                }
+            }
+        }
+        out.normalise();
+        out
+    }
+
     /// Relative L1 distance `∑|a − b| / ∑|b|` to a density on the same domain.
     pub fn relative_l1(&self, reference: &SlopeGrid) -> f64 {
         assert_eq!(self.domain, reference.domain, "relative_l1 needs equal domains");

@@ -5,7 +5,7 @@
 //! short of a tolerance, 1 for a refused job or a failed stage, 2 for a bad command line.
 
 use anyhow::Result;
-use brdfmill::job::{self, Job, Stage};
+use brdfmill::job::{self, Job, Progress, Stage};
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
 use std::time::Duration;
@@ -47,22 +47,41 @@ pub fn run(a: &Args) -> Result<i32> {
     println!("job       {} ({})", ready.job.name, a.job.display());
     let style = ProgressStyle::with_template("{spinner} {prefix:>9}  {msg} {elapsed}").unwrap();
     let mut bar: Option<ProgressBar> = None;
-    let mut progress = |stage: Stage, started: bool| {
-        if started {
+    let mut progress = |event: Progress| match event {
+        Progress::Round(round) => {
+            let line = format!(
+                    "   round {}  as-milled model: corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}], relief {:.3} mm, steps {:.1} µm rms",
+                    round.round,
+                    round.ndf_corr,
+                    round.ndf_l1,
+                    round.cov_ratio[0],
+                    round.cov_ratio[1],
+                    round.relief_mm,
+                    round.rms_step_um
+                );
+            match &bar {
+                Some(b) => b.suspend(|| println!("{line}")),
+                None => println!("{line}"),
+            }
+        }
+        Progress::Started(stage) => {
             let b = ProgressBar::new_spinner()
                 .with_style(style.clone())
                 .with_prefix(stage.name())
                 .with_message(match stage {
                     Stage::Ndf => "BRDF → observed distribution, Lucy–Richardson",
-                    Stage::Facets => "CVT sampling, annealing, Poisson integration",
+                    Stage::Facets => "design rounds: CVT sampling, annealing, Poisson integration, as-milled model",
                     Stage::Toolpath => "drop-cutter, roughing, raster finishing, G-code",
                     Stage::Simulate => "material removal on the stock",
                     Stage::Verify => "NDFs, metrics, figures, report",
                 });
             b.enable_steady_tick(Duration::from_millis(120));
             bar = Some(b);
-        } else if let Some(b) = bar.take() {
-            b.finish_with_message("done in");
+        }
+        Progress::Finished(_) => {
+            if let Some(b) = bar.take() {
+                b.finish_with_message("done in");
+            }
         }
     };
     let outcome = job::run(&ready, &a.out, until, &mut progress)?;
@@ -74,6 +93,23 @@ fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outc
     println!();
     for (stage, s) in &outcome.timings {
         println!("{:>9}  {:6.2} s", stage.name(), s);
+    }
+    let (rounds, chosen) = &outcome.rounds;
+    if let Some(c) = rounds.get(*chosen) {
+        println!(
+            "design    {} round{}, round {} chosen: as-milled model corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}]",
+            rounds.len(),
+            if rounds.len() == 1 { "" } else { "s" },
+            c.round,
+            c.ndf_corr,
+            c.ndf_l1,
+            c.cov_ratio[0],
+            c.cov_ratio[1]
+        );
+        println!(
+            "slopes    steepest facet {:.1}°, from {}",
+            outcome.slope_cap.0, outcome.slope_cap.1
+        );
     }
     if let Some(r) = outcome.relief_mm {
         println!("relief    {r:.3} mm (design tile)");
@@ -111,7 +147,7 @@ fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outc
 /// Print the figures and the verdict; the exit code.
 fn verdict(m: &brdfmill::verify::Metrics, allow_shortfall: bool) -> i32 {
     println!(
-        "design    NDF corr {:.4}, L1 {:.4}, JS {:.4}, variance ratio [{:.3}, {:.3}]",
+        "tile      NDF corr {:.4}, L1 {:.4}, JS {:.4}, variance ratio [{:.3}, {:.3}] (facets ⊛ base lobe)",
         m.design.ndf_corr, m.design.ndf_l1, m.design.ndf_js, m.design.cov_ratio[0], m.design.cov_ratio[1]
     );
     println!(

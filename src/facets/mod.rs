@@ -370,15 +370,7 @@ pub fn run(cfg: &FacetsConfig, ndf: &SlopeGrid) -> Result<Tile, FacetsError> {
     let anneal = arrange::anneal(&mut arrangement, &cfg.anneal, &mut rng);
 
     // 3. integration and rasterisation
-    let (w, h) = (cfg.facets_x, cfg.facets_y);
-    let mut z = vec![0.0; n];
-    PoissonSolver::new(w, h).facet_heights(&arrangement.p, &arrangement.q, cfg.facet_mm, &mut z);
-    let (sx, sy) = poisson::edge_steps(&arrangement.p, &arrangement.q, &z, w, h, cfg.facet_mm);
-    let seams = seam_stats(&sx, &sy, w, h);
-    let mut heightfield = rasterise(&arrangement, &z, cfg);
-    let top = heightfield.range().1;
-    heightfield.z_mm.iter_mut().for_each(|v| *v -= top);
-    z.iter_mut().for_each(|v| *v -= top);
+    let (z, heightfield, seams) = integrate(&arrangement, cfg);
 
     Ok(Tile {
         config: *cfg,
@@ -399,6 +391,46 @@ pub fn run(cfg: &FacetsConfig, ndf: &SlopeGrid) -> Result<Tile, FacetsError> {
         anneal,
         seams,
     })
+}
+
+/// Facet heights by periodic Poisson integration, the rasterised heightfield (top at z = 0) and the steps.
+fn integrate(arrangement: &Arrangement, cfg: &FacetsConfig) -> (Vec<f64>, Heightfield, SeamStats) {
+    let (w, h) = (cfg.facets_x, cfg.facets_y);
+    let mut z = vec![0.0; w * h];
+    PoissonSolver::new(w, h).facet_heights(&arrangement.p, &arrangement.q, cfg.facet_mm, &mut z);
+    let (sx, sy) = poisson::edge_steps(&arrangement.p, &arrangement.q, &z, w, h, cfg.facet_mm);
+    let seams = seam_stats(&sx, &sy, w, h);
+    let mut heightfield = rasterise(arrangement, &z, cfg);
+    let top = heightfield.range().1;
+    heightfield.z_mm.iter_mut().for_each(|v| *v -= top);
+    z.iter_mut().for_each(|v| *v -= top);
+    (z, heightfield, seams)
+}
+
+/// The same arrangement with every facet's x slope scaled by `scale[0]` and y slope by `scale[1]`,
+/// re-integrated: the heights and every step scale with the slopes, the order of the facets is kept. The
+/// sampling statistics are those of the unscaled sample.
+pub fn rescaled(tile: &Tile, scale: [f64; 2]) -> Tile {
+    let mut arrangement = tile.arrangement.clone();
+    arrangement.p.iter_mut().for_each(|p| *p *= scale[0]);
+    arrangement.q.iter_mut().for_each(|q| *q *= scale[1]);
+    let (z, heightfield, seams) = integrate(&arrangement, &tile.config);
+    let sites: Vec<(f64, f64)> = arrangement
+        .p
+        .iter()
+        .copied()
+        .zip(arrangement.q.iter().copied())
+        .collect();
+    Tile {
+        config: tile.config,
+        slope_stats: stats_of(&sites),
+        arrangement,
+        z_mm: z,
+        heightfield,
+        sampling: tile.sampling,
+        anneal: tile.anneal.clone(),
+        seams,
+    }
 }
 
 fn stats_of(s: &[(f64, f64)]) -> SlopeStats {

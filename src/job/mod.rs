@@ -26,6 +26,7 @@
 //! parameters are checked before any work starts ([`Job::load`]).
 
 use crate::brdf::Brdf;
+use crate::design::DesignConfig;
 use crate::facets::FacetsConfig;
 use crate::ndf::NdfConfig;
 use crate::tool::Shape;
@@ -100,6 +101,9 @@ pub struct Job {
     /// Facets stage.
     #[serde(default)]
     pub facets: FacetsConfig,
+    /// The design loop around the facets stage.
+    #[serde(default)]
+    pub design: DesignConfig,
     /// Toolpath stage.
     #[serde(default)]
     pub toolpath: ToolpathConfig,
@@ -147,6 +151,8 @@ pub struct Ready {
     pub machine: Machine,
     /// Path of the machine profile.
     pub machine_path: PathBuf,
+    /// Where the steepest facet (`facets.max_slope_deg`) came from: `"job"` or the finishing tool.
+    pub slope_cap_from: String,
 }
 
 impl Job {
@@ -177,7 +183,8 @@ impl Job {
             }
             None => return Err(invalid(format!("missing `version` (expected version = {VERSION})"))),
         }
-        let job: Job = if overrides.is_empty() {
+        let cap_given = raw.get("facets").and_then(|f| f.get("max_slope_deg")).is_some();
+        let mut job: Job = if overrides.is_empty() {
             // from the text, so an error names its line and column
             toml::from_str(&text).map_err(|e| invalid(e.to_string()))?
         } else {
@@ -208,6 +215,14 @@ impl Job {
             )));
         }
         job.ndf.validate().map_err(|e| invalid(e.to_string()))?;
+        let slope_cap_from = if cap_given {
+            "job (`facets.max_slope_deg`)".to_string()
+        } else {
+            let (deg, why) = tool_slope_cap(tool, job.facets.facet_mm, job.ndf.max_angle_deg);
+            job.facets.max_slope_deg = deg;
+            why
+        };
+        job.design.validate().map_err(|e| invalid(e.to_string()))?;
         job.facets.validate().map_err(|e| invalid(e.to_string()))?;
         if tool.diameter_mm() > job.facets.facet_mm + 1e-9 {
             return Err(invalid(format!(
@@ -237,7 +252,44 @@ impl Job {
             target,
             machine,
             machine_path,
+            slope_cap_from,
         })
+    }
+}
+
+/// Margin kept between a tile's relief and the finishing tool's flute length, fraction of the flutes.
+pub const FLUTE_MARGIN: f64 = 0.1;
+
+/// The steepest facet the finishing ball can cut, degrees, and why (DESIGN.md §4.4). A ball cuts any slope
+/// below 90° with its side, so its geometry alone sets no limit short of the equator; what limits a facet
+/// is that the flutes must reach its low edge while the shank clears its high edge: one facet of side `a`
+/// and slope `tan θ` rises `a·tan θ` across, so `tan θ ≤ (L − m)/a` with `L` the flute length and `m` a
+/// margin of [`FLUTE_MARGIN`]·L. It is never steeper than the NDF grid reaches (`ndf.max_angle_deg`).
+pub fn tool_slope_cap(tool: &crate::toolpath::machine::Tool, facet_mm: f64, grid_deg: f64) -> (f64, String) {
+    let reach = tool.flute_length_mm * (1.0 - FLUTE_MARGIN);
+    let flutes = (reach / facet_mm).atan().to_degrees();
+    if flutes <= grid_deg {
+        (
+            flutes,
+            format!(
+                "the tool: `{}`'s flutes of {} mm less {:.0}% over a {} mm facet, atan({:.3}/{}) = {:.1}°",
+                tool.id,
+                tool.flute_length_mm,
+                FLUTE_MARGIN * 100.0,
+                facet_mm,
+                reach,
+                facet_mm,
+                flutes
+            ),
+        )
+    } else {
+        (
+            grid_deg,
+            format!(
+                "the NDF grid (`ndf.max_angle_deg` = {grid_deg}°; `{}`'s flutes would allow {flutes:.1}°)",
+                tool.id
+            ),
+        )
     }
 }
 
@@ -375,7 +427,7 @@ pub(crate) fn resolve_spec(spec: &str, dir: &Path) -> String {
 mod run;
 mod summary;
 
-pub use run::{run, Outcome, Stage};
+pub use run::{run, Outcome, Progress, Stage};
 
 #[cfg(test)]
 mod tests {

@@ -3,6 +3,7 @@
 
 use super::{resolve_spec, JobError, Ready};
 use crate::brdf::Brdf;
+use crate::design::{self, DesignInput, Round};
 use crate::facets::{self, Tile, TileFile};
 use crate::ndf::{self, Kernel, Ndf, NdfFile};
 use crate::simulate::{self, Deviation, SimFile, SimulateConfig, Simulation};
@@ -57,6 +58,16 @@ impl Stage {
 /// crash, a full disk) leaves `"running"` behind, so its folder never passes for a finished run.
 pub const RUN_STATE: &str = "run.json";
 
+/// What `run` reports as it goes.
+pub enum Progress<'a> {
+    /// A stage starts.
+    Started(Stage),
+    /// A stage has written its artifacts.
+    Finished(Stage),
+    /// The design loop finished a round.
+    Round(&'a Round),
+}
+
 /// What the run produced.
 pub struct Outcome {
     /// The metrics (`None` when the run stopped before verification).
@@ -73,6 +84,10 @@ pub struct Outcome {
     pub timings: Vec<(Stage, f64)>,
     /// The report's path (`None` before verification).
     pub report: Option<PathBuf>,
+    /// The design loop's rounds and the one chosen (index), empty before the facets.
+    pub rounds: (Vec<Round>, usize),
+    /// The steepest facet, degrees, and where it came from.
+    pub slope_cap: (f64, String),
 }
 
 /// `run.json`: the state of the run in its folder (see [`RUN_STATE`]).
@@ -125,14 +140,9 @@ impl Out<'_> {
     }
 }
 
-/// Run the stages in order up to and including `until`, writing each artifact to `out` as it is made.
-/// `progress(stage, started)` is called when a stage starts (`true`) and ends (`false`).
-pub fn run(
-    ready: &Ready,
-    out: &Path,
-    until: Stage,
-    progress: &mut dyn FnMut(Stage, bool),
-) -> Result<Outcome, JobError> {
+/// Run the stages in order up to and including `until`, writing each artifact to `out` as it is made;
+/// `progress` hears of every stage's start and end and of every design round.
+pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Progress)) -> Result<Outcome, JobError> {
     let job = &ready.job;
     let mut o = Out {
         dir: out,
@@ -140,13 +150,18 @@ pub fn run(
     };
     let mut timings = vec![];
     let mut clock = std::time::Instant::now();
-    let mut step = |stage: Stage, timings: &mut Vec<(Stage, f64)>, started: bool| {
-        progress(stage, started);
-        if !started {
-            timings.push((stage, clock.elapsed().as_secs_f64()));
-        }
-        clock = std::time::Instant::now();
-    };
+    let mut step =
+        |progress: &mut dyn FnMut(Progress), stage: Stage, timings: &mut Vec<(Stage, f64)>, started: bool| {
+            progress(if started {
+                Progress::Started(stage)
+            } else {
+                Progress::Finished(stage)
+            });
+            if !started {
+                timings.push((stage, clock.elapsed().as_secs_f64()));
+            }
+            clock = std::time::Instant::now();
+        };
     let tool = ready
         .machine
         .tool(&job.toolpath.tool)
@@ -181,19 +196,42 @@ pub fn run(
         bytes_written: 0,
         timings: vec![],
         report: None,
+        rounds: (vec![], 0),
+        slope_cap: (job.facets.max_slope_deg, ready.slope_cap_from.clone()),
     };
     write_state(&mut o, &job.name, &timings, "running")?;
-    step(Stage::Ndf, &mut timings, true);
+    step(&mut *progress, Stage::Ndf, &mut timings, true);
     let nd = ndf_stage(ready, r, stepover, &mut o)?;
-    step(Stage::Ndf, &mut timings, false);
+    step(&mut *progress, Stage::Ndf, &mut timings, false);
     write_state(&mut o, &job.name, &timings, "running")?;
     if until == Stage::Ndf {
         return finish(o, timings, outcome);
     }
 
-    step(Stage::Facets, &mut timings, true);
-    let (tile, tile_png) = facets_stage(ready, &nd.ndf, &mut o)?;
-    step(Stage::Facets, &mut timings, false);
+    step(&mut *progress, Stage::Facets, &mut timings, true);
+    let scallop = scallop_lobe(ready, &nd, r, stepover)?;
+    let tool_shape = Shape::Ball {
+        diameter_mm: tool.diameter_mm(),
+    };
+    let tol = &job.verify.tolerances;
+    let d = design::run(
+        &job.design,
+        &job.facets,
+        &DesignInput {
+            ndf: &nd.ndf,
+            base: nd.kernel.as_ref(),
+            scallop: &scallop,
+            tool: tool_shape,
+            cov_band: tol.cov_ratio,
+            corr_min: tol.ndf_corr_min,
+            l1_max: tol.ndf_l1_max,
+        },
+        &mut |round| progress(Progress::Round(round)),
+    )
+    .map_err(stage_err("facets"))?;
+    let (tile, tile_png) = facets_stage(&nd.ndf, d.tile, &mut o)?;
+    outcome.rounds = (d.rounds, d.chosen);
+    step(&mut *progress, Stage::Facets, &mut timings, false);
     write_state(&mut o, &job.name, &timings, "running")?;
     let (lo, hi) = tile.heightfield.range();
     outcome.relief_mm = Some(hi - lo);
@@ -201,7 +239,7 @@ pub fn run(
         return finish(o, timings, outcome);
     }
 
-    step(Stage::Toolpath, &mut timings, true);
+    step(&mut *progress, Stage::Toolpath, &mut timings, true);
     let mut tcfg = job.toolpath.clone();
     if tcfg.job == ToolpathConfig::default().job {
         tcfg.job = job.name.clone();
@@ -210,25 +248,25 @@ pub fn run(
     o.write("program.nc", program.gcode.as_bytes())?;
     let summary = serde_json::to_string_pretty(&program.summary).map_err(stage_err("toolpath"))?;
     o.write("program.json", summary.as_bytes())?;
-    step(Stage::Toolpath, &mut timings, false);
+    step(&mut *progress, Stage::Toolpath, &mut timings, false);
     write_state(&mut o, &job.name, &timings, "running")?;
     outcome.program = Some(program.summary.clone());
     if until == Stage::Toolpath {
         return finish(o, timings, outcome);
     }
 
-    step(Stage::Simulate, &mut timings, true);
+    step(&mut *progress, Stage::Simulate, &mut timings, true);
     let shape = Shape::Ball {
         diameter_mm: tool.diameter_mm(),
     };
     let (sim, dev, sim_png, dev_png) = simulate_stage(ready, shape, &program.gcode, &tile.heightfield, &mut o)?;
-    step(Stage::Simulate, &mut timings, false);
+    step(&mut *progress, Stage::Simulate, &mut timings, false);
     write_state(&mut o, &job.name, &timings, "running")?;
     if until == Stage::Simulate {
         return finish(o, timings, outcome);
     }
 
-    step(Stage::Verify, &mut timings, true);
+    step(&mut *progress, Stage::Verify, &mut timings, true);
     let v = verify::run(
         &job.verify,
         &VerifyInput {
@@ -243,6 +281,9 @@ pub fn run(
             deviation: &dev,
             tool_radius_mm: r,
             stepover_mm: stepover,
+            raster_angle_deg: job.toolpath.angle_deg,
+            cone_deg: job.facets.max_slope_deg,
+            rounds: &outcome.rounds.0,
         },
     )
     .map_err(stage_err("verify"))?;
@@ -268,7 +309,7 @@ pub fn run(
     }
     .to_html();
     o.write("report.html", html.as_bytes())?;
-    step(Stage::Verify, &mut timings, false);
+    step(&mut *progress, Stage::Verify, &mut timings, false);
     outcome.metrics = Some(v.metrics);
     outcome.report = Some(out.join("report.html"));
     finish(o, timings, outcome)
@@ -299,9 +340,27 @@ fn ndf_stage(ready: &Ready, r: f64, stepover: f64, o: &mut Out) -> Result<NdfSta
     Ok(NdfStage { ndf: n, kernel, polish })
 }
 
-/// NDF → facet tile: `tile.json`, `tile.npy`, `tile.png`, `tile.stl`. Returns the tile and its relief PNG.
-fn facets_stage(ready: &Ready, n: &Ndf, o: &mut Out) -> Result<(Tile, Vec<u8>), JobError> {
-    let tile = facets::run(&ready.job.facets, &n.target).map_err(stage_err("facets"))?;
+/// The finishing raster's scallop lobe with the material's polish: the base lobe when that is the scallop
+/// lobe, otherwise made here (the as-milled model and the milled measurement use it either way).
+fn scallop_lobe(ready: &Ready, nd: &NdfStage, r: f64, stepover: f64) -> Result<Kernel, JobError> {
+    let job = &ready.job;
+    match &nd.kernel {
+        Some(k) if job.target.base == "scallop" => Ok(k.clone()),
+        _ => Kernel::scallop(
+            &job.ndf.domain(),
+            r,
+            stepover,
+            job.toolpath.angle_deg,
+            nd.polish.as_ref(),
+            &job.ndf,
+        )
+        .map_err(|e| stage_error("facets", e)),
+    }
+}
+
+/// The design loop's tile → `tile.json`, `tile.npy`, `tile.png`, `tile.stl`. Returns the tile and its relief
+/// PNG.
+fn facets_stage(n: &Ndf, tile: Tile, o: &mut Out) -> Result<(Tile, Vec<u8>), JobError> {
     let tile_file = TileFile::new(
         &tile,
         facets::format::Source {

@@ -162,18 +162,28 @@ pub fn albedo(f: impl Fn(&crate::geometry::Vec3, &crate::geometry::Vec3) -> crat
 }
 
 /// Measure `candidate` (already blurred by whatever lobe it still lacks) against `reference` (the target's
-/// observed distribution) and the target BRDF.
+/// observed distribution) and the target BRDF. The slope variances are those of both densities restricted to
+/// the machinable cone `|∇z| ≤ cone_tan` (`f64::INFINITY`: the whole grid); L1, correlation and
+/// Jensen–Shannon are over the whole grid, so the target's mass beyond the cone counts against them.
 pub fn measure(
     reference: &SlopeGrid,
     candidate: &SlopeGrid,
     target: &Brdf,
     incident_deg: &[f64],
     tol: &Tolerances,
+    cone_tan: f64,
 ) -> SurfaceMetrics {
     let ndf_l1 = candidate.relative_l1(reference);
     let ndf_corr = correlation(&candidate.density, &reference.density);
     let ndf_js = jensen_shannon(&candidate.density, &reference.density);
-    let (sr, sc) = (reference.stats(), candidate.stats());
+    let (sr, sc) = if cone_tan.is_finite() {
+        (
+            reference.within_cone(cone_tan).stats(),
+            candidate.within_cone(cone_tan).stats(),
+        )
+    } else {
+        (reference.stats(), candidate.stats())
+    };
     let cov_ratio = [sc.cov[0][0] / sr.cov[0][0], sc.cov[1][1] / sr.cov[1][1]];
     let (pr, pc) = (peak(reference), peak(candidate));
     let (na, nb) = (slope_to_normal(pr.0, pr.1), slope_to_normal(pc.0, pc.1));
@@ -254,7 +264,7 @@ mod tests {
         let mut g = SlopeGrid::from_fn(d, |p, q| (-(p * p + q * q) / 0.09).exp());
         g.normalise();
         let brdf = Brdf::parse("beckmann:alpha=0.3").unwrap();
-        let m = measure(&g, &g, &brdf, &[0.0, 45.0], &Tolerances::default());
+        let m = measure(&g, &g, &brdf, &[0.0, 45.0], &Tolerances::default(), f64::INFINITY);
         assert!(m.ndf_l1 < 1e-12 && (m.ndf_corr - 1.0).abs() < 1e-12 && m.ndf_js < 1e-12);
         assert!((m.cov_ratio[0] - 1.0).abs() < 1e-12 && m.peak_offset_deg < 1e-9);
         // the grid's microfacet BRDF reproduces the analytic Beckmann's albedo
@@ -272,7 +282,7 @@ mod tests {
         a.normalise();
         b.normalise();
         let brdf = Brdf::parse("beckmann:alpha=0.3").unwrap();
-        let m = measure(&a, &b, &brdf, &[0.0], &Tolerances::default());
+        let m = measure(&a, &b, &brdf, &[0.0], &Tolerances::default(), f64::INFINITY);
         assert!(m.cov_ratio[0] > 1.2 && !m.pass);
         assert!(m.ndf_js > 0.0 && m.ndf_js < 1.0);
     }

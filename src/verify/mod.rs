@@ -13,6 +13,7 @@
 
 pub(crate) mod explain;
 pub(crate) mod metrics;
+pub mod milled;
 pub(crate) mod render;
 pub(crate) mod report;
 mod run;
@@ -41,4 +42,10 @@ pub struct Metrics {
     pub notes: Vec<String>,
     /// The diffraction warning of the scallop period (`optics::wave::diffraction_warning`), if any.
     pub diffraction: Option<String>,
+    /// How the milled surface was measured (absent in files written before it was recorded).
+    #[serde(default)]
+    pub measurement: Option<milled::Measurement>,
+    /// The design loop's rounds, in order: each tile's as-milled model against the target.
+    #[serde(default)]
+    pub rounds: Vec<crate::design::Round>,
 }

@@ -5,6 +5,7 @@
 //! lobes are applied to what, the metrics and their verdict, the explanations, the optical constants of the
 //! wave check) lives here, so the job runner only sequences stages and writes files.
 
+use super::milled::{self, Measurement};
 use super::report::Figure;
 use super::{explain, metrics, render, Metrics, Tolerances};
 use crate::brdf::Brdf;
@@ -127,6 +128,13 @@ pub struct VerifyInput<'a> {
     pub tool_radius_mm: f64,
     /// Finishing stepover, mm.
     pub stepover_mm: f64,
+    /// Angle of the finishing passes from x, degrees.
+    pub raster_angle_deg: f64,
+    /// The machinable cone: the steepest facet the design allows, degrees (slope variances are compared
+    /// within it).
+    pub cone_deg: f64,
+    /// The design loop's rounds, for `metrics.json` and the convergence figure.
+    pub rounds: &'a [crate::design::Round],
 }
 
 /// What verification produced.
@@ -163,20 +171,10 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         Some(k) => normalised(k.convolve(&design_raw)),
         None => design_raw,
     };
-    // The milled surface away from the stock's edge: the outer r is only grazed by the bit, and the next r is
-    // cut by ball positions on one side only (the tool centre stays inside the area).
-    let margin = milled_margin(input);
-    let (milled_raw, outside) = geometric::ndf(&input.sim.heightfield, domain, cfg.prefilter_um, margin);
-    let polish_kernel = match input.polish {
-        Some(p) if input.base_is_scallop => Some(Kernel::from_brdf(p, &domain, input.ndf_config)?),
-        _ => None,
-    };
-    let milled = match &polish_kernel {
-        Some(k) => normalised(k.convolve(&milled_raw)),
-        None => milled_raw,
-    };
-    let design_m = metrics::measure(&n.observed, &design, input.target, &cfg.incident_deg, &tol);
-    let milled_m = metrics::measure(&n.observed, &milled, input.target, &cfg.incident_deg, &tol);
+    let (milled, outside, measurement) = milled_ndf(cfg, input)?;
+    let cone_tan = input.cone_deg.to_radians().tan();
+    let design_m = metrics::measure(&n.observed, &design, input.target, &cfg.incident_deg, &tol, cone_tan);
+    let milled_m = metrics::measure(&n.observed, &milled, input.target, &cfg.incident_deg, &tol, cone_tan);
     let facets = input.tile.config.facets_x * input.tile.config.facets_y;
     let mut notes = explain::shortfall(&explain::Findings {
         milled: &milled_m,
@@ -187,6 +185,12 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         stepover_mm: input.stepover_mm,
         outside_grid: outside,
         facets,
+        scale: input
+            .rounds
+            .iter()
+            .min_by(|a, b| a.score.total_cmp(&b.score))
+            .map(|r| r.scale)
+            .unwrap_or([1.0, 1.0]),
     });
     if input.tile.sampling.steep_mass > 1e-4 {
         notes.push(format!(
@@ -195,7 +199,17 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
             input.tile.config.max_slope_deg
         ));
     }
-    let (wave_png, wave_albedo) = wave_patch(cfg, input, margin)?;
+    if !measurement.window.whole() {
+        notes.push(format!(
+            "The milled NDF is measured over the whole interior ({:.2} × {:.2} mm), which is not a whole number of tiles: the work area needs to be at least a tile ({} × {} mm) plus {:.2} mm on each side for the window to hold whole tiles, so the facets inside it are not weighted equally.",
+            measurement.window.size_mm[0],
+            measurement.window.size_mm[1],
+            input.tile.config.facets_x as f64 * input.tile.config.facet_mm,
+            input.tile.config.facets_y as f64 * input.tile.config.facet_mm,
+            measurement.margin_mm
+        ));
+    }
+    let (wave_png, wave_albedo) = wave_patch(cfg, input, measurement.margin_cells)?;
     let o_std = n.observed_stats.cov[0][0].max(n.observed_stats.cov[1][1]).sqrt();
     let diffraction = wave::diffraction_warning(
         input.stepover_mm,
@@ -207,13 +221,10 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         notes.push(format!("Diffraction: {w}"));
     }
     let reference = format!(
-        "the observed half-angle distribution O of `{}`; the design is convolved with the base lobe `{}`, the milled surface with {}",
+        "the observed half-angle distribution O of `{}`; the design is convolved with the base lobe `{}`, the milled surface (slopes averaged over one stepover across the passes) with the scallop lobe `{}`",
         n.brdf_spec,
         n.base_spec.as_deref().unwrap_or("none"),
-        polish_kernel
-            .as_ref()
-            .map(|k| format!("the polish lobe `{}`", k.label))
-            .unwrap_or_else(|| "nothing (the simulation models the whole base lobe)".into())
+        measurement.scallops
     );
     let metrics = Metrics {
         version: 1,
@@ -224,8 +235,10 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         reference,
         notes,
         diffraction,
+        measurement: Some(measurement),
+        rounds: input.rounds.to_vec(),
     };
-    let figures = figures(
+    let mut figures = figures(
         cfg,
         input,
         &design,
@@ -234,6 +247,9 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         wave_albedo,
         metrics.diffraction.is_some(),
     );
+    if !input.rounds.is_empty() {
+        figures.insert(0, convergence(input.rounds, &metrics, &tol));
+    }
     Ok(VerifyOutput {
         metrics,
         design,
@@ -244,10 +260,150 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
 }
 
 /// The band of the simulated stock left out of the milled NDF, cells: one tool radius grazed, one cut from
-/// one side only, and a design sample either side.
+/// one side only, a design sample either side, and the half stepover the slope mean reaches.
 fn milled_margin(input: &VerifyInput) -> usize {
     let r = input.tool_radius_mm;
-    ((2.0 * r + 2.0 * input.tile.heightfield.pitch_mm) / input.sim.heightfield.pitch_mm).ceil() as usize
+    let p = input.sim.heightfield.pitch_mm;
+    ((2.0 * r + 2.0 * input.tile.heightfield.pitch_mm) / p).ceil() as usize + milled::reach_cells(p, input.stepover_mm)
+}
+
+/// The milled surface's NDF as `milled` describes: whole tiles, slopes averaged over a stepover, the
+/// scallop lobe (with the polish) convolved back. Returns the NDF, the fraction of slopes beyond the grid,
+/// and how it was measured.
+fn milled_ndf(cfg: &VerifyConfig, input: &VerifyInput) -> Result<(SlopeGrid, f64, Measurement), VerifyError> {
+    let n = input.ndf;
+    let domain = n.config.domain();
+    let margin = milled_margin(input);
+    let hf = &input.sim.heightfield;
+    let c = &input.tile.config;
+    let tile_mm = [c.facets_x as f64 * c.facet_mm, c.facets_y as f64 * c.facet_mm];
+    let win = milled::window(hf, margin, tile_mm).ok_or(VerifyError::TooSmall {
+        side_mm: cfg.wave_patch_mm,
+        margin,
+    })?;
+    let mut slopes = milled::slopes(hf, &win, input.raster_angle_deg, input.stepover_mm);
+    if cfg.prefilter_um > 0.0 {
+        // the pre-filter is a Gaussian of the heights; the stepover mean already smooths below a stepover
+        let f = geometric::gaussian(hf, cfg.prefilter_um * 1e-3);
+        slopes = milled::slopes(&f, &win, input.raster_angle_deg, input.stepover_mm);
+    }
+    let (raw, outside) = geometric::ndf_of_slopes(&slopes, domain);
+    let lobe = match input.base {
+        Some(k) if input.base_is_scallop => k.clone(),
+        _ => Kernel::scallop(
+            &domain,
+            input.tool_radius_mm,
+            input.stepover_mm,
+            input.raster_angle_deg,
+            input.polish,
+            input.ndf_config,
+        )?,
+    };
+    let milled = normalised(lobe.convolve(&raw));
+    let cone_tan = input.cone_deg.to_radians().tan();
+    let beyond = 1.0 - {
+        let mut inside = n.observed.clone();
+        let d = inside.domain;
+        for j in 0..d.ny {
+            for i in 0..d.nx {
+                if d.p_at(i).hypot(d.q_at(j)) > cone_tan {
+                    inside.density[j * d.nx + i] = 0.0;
+                }
+            }
+        }
+        inside.mass() / n.observed.mass().max(1e-300)
+    };
+    let measurement = Measurement {
+        window: win,
+        margin_cells: margin,
+        margin_mm: margin as f64 * hf.pitch_mm,
+        scallops: lobe.label.clone(),
+        cone_deg: input.cone_deg,
+        target_mass_beyond_cone: beyond,
+        outside_grid: outside,
+    };
+    Ok((milled, outside, measurement))
+}
+
+/// The design loop's convergence: each round's as-milled model variance ratios, the tolerance band, and the
+/// simulated cut's ratios at the chosen round.
+fn convergence(rounds: &[crate::design::Round], metrics: &Metrics, tol: &Tolerances) -> Figure {
+    use crate::plot::{LinePlot, Series, PALETTE};
+    let n = rounds.len() as f64;
+    let pts = |k: usize| {
+        rounds
+            .iter()
+            .map(|r| (r.round as f64, r.cov_ratio[k]))
+            .collect::<Vec<_>>()
+    };
+    let band = |v: f64| vec![(0.8, v), (n + 0.2, v)];
+    let chosen = rounds
+        .iter()
+        .min_by(|a, b| a.score.total_cmp(&b.score))
+        .map(|r| r.round as f64)
+        .unwrap_or(1.0);
+    let plot = LinePlot {
+        title: "design rounds: slope variance ratio".into(),
+        x_label: "round".into(),
+        y_label: "variance / target".into(),
+        series: vec![
+            Series {
+                label: "model x".into(),
+                points: pts(0),
+                color: PALETTE[0],
+                dashed: false,
+            },
+            Series {
+                label: "model y".into(),
+                points: pts(1),
+                color: PALETTE[1],
+                dashed: false,
+            },
+            Series {
+                label: "milled x".into(),
+                points: vec![(chosen, metrics.milled.cov_ratio[0])],
+                color: PALETTE[0],
+                dashed: true,
+            },
+            Series {
+                label: "milled y".into(),
+                points: vec![(chosen, metrics.milled.cov_ratio[1])],
+                color: PALETTE[1],
+                dashed: true,
+            },
+            Series {
+                label: "tolerance".into(),
+                points: band(tol.cov_ratio[0]),
+                color: [120, 120, 120],
+                dashed: true,
+            },
+            Series {
+                label: String::new(),
+                points: band(tol.cov_ratio[1]),
+                color: [120, 120, 120],
+                dashed: true,
+            },
+        ],
+        size_px: (420, 240),
+        log_y: false,
+    };
+    let rows: Vec<String> = rounds
+        .iter()
+        .map(|r| {
+            format!(
+                "round {}: slopes ×[{:.3}, {:.3}], model corr {:.4}, L1 {:.3}, variance [{:.3}, {:.3}], relief {:.3} mm, steps {:.1} µm rms",
+                r.round, r.scale[0], r.scale[1], r.ndf_corr, r.ndf_l1, r.cov_ratio[0], r.cov_ratio[1], r.relief_mm, r.rms_step_um
+            )
+        })
+        .collect();
+    Figure {
+        title: "Design rounds".into(),
+        caption: format!(
+            "Each round models what the ball leaves of the tile (its opening of the periodic tile, convolved with the scallop lobe) and scales the facet slopes so the model's variance meets the target's. The dashed marks are the simulated G-code of the chosen round (round {chosen}). {}.",
+            rows.join("; ")
+        ),
+        png: plot.render().to_png(),
+    }
 }
 
 /// The report's figures of the verification stage.

@@ -1,0 +1,244 @@
+//! Stage 3 in a loop — fabrication-aware design: the facets stage (sampling, arrangement, integration) run
+//! again and again against a model of what the finishing ball will cut, until the *as-milled* surface, not
+//! the design tile, matches the target (DESIGN.md §3.1).
+//!
+//! Each round: facets from the current aim → the tile's as-milled model ([`model`]: the ball's opening of
+//! the periodic tile, its NDF convolved with the scallop lobe) → its figures against the target's observed
+//! distribution (correlation, L1, slope variances within the machinable cone) → a multiplicative
+//! correction of the aim ([`update`]). The loop stops when the model meets the tolerances with a margin, or
+//! after `rounds`; the round whose model scores best is the design. Lucy–Richardson, the CVT and Eqs. 17–21
+//! stay the core: this is a loop around them. The final verdict still comes from simulating the G-code.
+
+pub mod model;
+pub mod update;
+
+use crate::distance::correlation;
+use crate::facets::{self, FacetsConfig, Tile};
+use crate::ndf::{Kernel, Ndf};
+use crate::optics::geometric;
+use crate::slope::SlopeGrid;
+use crate::tool::Shape;
+use serde::{Deserialize, Serialize};
+
+/// `[design]` of a job.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct DesignConfig {
+    /// Rounds at most (1: the facets stage once, no correction).
+    pub rounds: usize,
+    /// Gain γ of the multiplicative correction (1: a full Richardson–Lucy step).
+    pub gain: f64,
+    /// Stop early once every figure of the model is within this fraction of its tolerance band (0.5: the
+    /// variance ratio within half the band, correlation and L1 within half their margins).
+    pub stop_fraction: f64,
+}
+
+impl Default for DesignConfig {
+    fn default() -> Self {
+        Self {
+            rounds: 4,
+            gain: 1.0,
+            stop_fraction: 0.35,
+        }
+    }
+}
+
+impl DesignConfig {
+    /// Check every field; the error names it.
+    pub fn validate(&self) -> Result<(), DesignError> {
+        let bad = |field: &'static str, reason: String| Err(DesignError::Config { field, reason });
+        if !(1..=50).contains(&self.rounds) {
+            return bad("rounds", format!("must be in 1..=50, got {}", self.rounds));
+        }
+        if !(self.gain > 0.0 && self.gain <= 2.0) {
+            return bad("gain", format!("must be in (0, 2], got {}", self.gain));
+        }
+        if !(self.stop_fraction >= 0.0 && self.stop_fraction <= 1.0) {
+            return bad(
+                "stop_fraction",
+                format!("must be in [0, 1], got {}", self.stop_fraction),
+            );
+        }
+        Ok(())
+    }
+}
+
+/// The design loop failed.
+#[derive(Debug, thiserror::Error)]
+pub enum DesignError {
+    /// A `[design]` setting is out of range.
+    #[error("`design.{field}` {reason}")]
+    Config {
+        /// The field.
+        field: &'static str,
+        /// What was expected.
+        reason: String,
+    },
+    /// The facets stage failed.
+    #[error(transparent)]
+    Facets(#[from] facets::FacetsError),
+}
+
+/// One round of the loop, as `metrics.json` records it.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Round {
+    /// 1, 2, …
+    pub round: usize,
+    /// The as-milled model's NDF correlation with the target's observed distribution.
+    pub ndf_corr: f64,
+    /// … relative L1 distance.
+    pub ndf_l1: f64,
+    /// … slope variance ratio along x and y within the machinable cone.
+    pub cov_ratio: [f64; 2],
+    /// The design tile alone (facets ⊛ base lobe): variance ratio along x and y.
+    pub design_cov_ratio: [f64; 2],
+    /// The tile's relief, mm.
+    pub relief_mm: f64,
+    /// RMS height step between neighbouring facets, µm.
+    pub rms_step_um: f64,
+    /// Fraction of the tile the ball cannot reach.
+    pub unreachable: f64,
+    /// The aim's slope scales along x and y (1: the target NDF itself).
+    pub scale: [f64; 2],
+    /// The round's score: its worst figure as a fraction of its tolerance band (≤ 1 meets them all).
+    pub score: f64,
+}
+
+/// What the loop needs besides the facets configuration.
+pub struct DesignInput<'a> {
+    /// The NDF stage's result: `target` is the first aim, `observed` the reference.
+    pub ndf: &'a Ndf,
+    /// The base lobe the design tile is convolved with (its design figures), if any.
+    pub base: Option<&'a Kernel>,
+    /// The scallop lobe (with the polish) the as-milled model is convolved with.
+    pub scallop: &'a Kernel,
+    /// The finishing bit.
+    pub tool: Shape,
+    /// The band the slope variance ratios must fall in, `[low, high]` (the verdict's).
+    pub cov_band: [f64; 2],
+    /// The smallest NDF correlation (the verdict's).
+    pub corr_min: f64,
+    /// The largest relative L1 distance (the verdict's).
+    pub l1_max: f64,
+}
+
+/// The loop's result.
+pub struct Design {
+    /// The chosen round's tile.
+    pub tile: Tile,
+    /// Every round, in order.
+    pub rounds: Vec<Round>,
+    /// Index into `rounds` of the chosen one.
+    pub chosen: usize,
+    /// The chosen round's aim density (what its facets sampled).
+    pub aim: SlopeGrid,
+}
+
+/// Run the loop; `on_round` is called after each round (progress).
+pub fn run(
+    cfg: &DesignConfig,
+    fcfg: &FacetsConfig,
+    input: &DesignInput,
+    on_round: &mut dyn FnMut(&Round),
+) -> Result<Design, DesignError> {
+    cfg.validate()?;
+    let n = input.ndf;
+    let cone_tan = fcfg.max_slope_deg.to_radians().tan();
+    let mut scale = [1.0, 1.0];
+    let aim = n.target.within_cone(cone_tan);
+    let mut first: Option<Tile> = None;
+    let mut rounds: Vec<Round> = vec![];
+    let mut best: Option<(Tile, SlopeGrid)> = None;
+    let mut chosen = 0;
+    for k in 0..cfg.rounds {
+        let tile = match &first {
+            None => facets::run(fcfg, &aim)?,
+            Some(t) => facets::rescaled(t, scale),
+        };
+        if first.is_none() {
+            first = Some(tile.clone());
+        }
+        let round = evaluate(k + 1, &tile, input, cone_tan, scale);
+        on_round(&round);
+        let better = rounds.get(chosen).is_none_or(|b| round.score < b.score);
+        let done = round.score <= cfg.stop_fraction;
+        let next = update::next_scale(scale, round.cov_ratio, cfg.gain);
+        rounds.push(round);
+        if better {
+            chosen = k;
+            best = Some((tile, update::scaled(&n.target, scale, cone_tan)));
+        }
+        if done {
+            break;
+        }
+        scale = next;
+    }
+    let (tile, aim) = best.expect("at least one round");
+    Ok(Design {
+        tile,
+        rounds,
+        chosen,
+        aim,
+    })
+}
+
+/// One round's figures.
+fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale: [f64; 2]) -> Round {
+    let n = input.ndf;
+    let domain = n.config.domain();
+    let pitch = model::model_pitch_mm(tile, &input.tool);
+    let opened = model::as_milled(tile, &input.tool, pitch);
+    let (raw, _) = geometric::ndf(&opened, domain, 0.0, 1);
+    let mut milled = input.scallop.convolve(&raw);
+    milled.normalise();
+    let facet_slopes: Vec<(f64, f64)> = tile
+        .arrangement
+        .p
+        .iter()
+        .copied()
+        .zip(tile.arrangement.q.iter().copied())
+        .collect();
+    let (design_raw, _) = geometric::ndf_of_slopes(&facet_slopes, domain);
+    let mut design = match input.base {
+        Some(k) => k.convolve(&design_raw),
+        None => design_raw,
+    };
+    design.normalise();
+    let obs = n.observed.within_cone(cone_tan).stats();
+    let ratio = |g: &SlopeGrid| {
+        let s = g.within_cone(cone_tan).stats();
+        [s.cov[0][0] / obs.cov[0][0], s.cov[1][1] / obs.cov[1][1]]
+    };
+    let cov_ratio = ratio(&milled);
+    let ndf_corr = correlation(&milled.density, &n.observed.density);
+    let ndf_l1 = milled.relative_l1(&n.observed);
+    let band = |v: f64| {
+        let [lo, hi] = input.cov_band;
+        if v >= 1.0 {
+            (v - 1.0) / (hi - 1.0).max(1e-9)
+        } else {
+            (1.0 - v) / (1.0 - lo).max(1e-9)
+        }
+    };
+    let score = [
+        band(cov_ratio[0]),
+        band(cov_ratio[1]),
+        (1.0 - ndf_corr) / (1.0 - input.corr_min).max(1e-9),
+        ndf_l1 / input.l1_max.max(1e-9),
+    ]
+    .into_iter()
+    .fold(0.0, f64::max);
+    let (lo, hi) = tile.heightfield.range();
+    Round {
+        round,
+        ndf_corr,
+        ndf_l1,
+        cov_ratio,
+        design_cov_ratio: ratio(&design),
+        relief_mm: hi - lo,
+        rms_step_um: tile.seams.rms_um,
+        unreachable: model::unreachable_fraction(tile, &opened),
+        scale,
+        score,
+    }
+}

@@ -1,0 +1,96 @@
+//! The as-milled model of a tile: what the finishing ball leaves of the periodic design (DESIGN.md §4.3).
+//!
+//! The best any raster of a ball can leave on a surface `h` is its opening `O = erode(dilate(h))`
+//! ([`crate::morphology::opening`]): planes and convex edges survive, concave corners and the foot of every
+//! step between facets are filled with the ball's own sphere. The raster's grooves come on top, and their
+//! slopes are modelled by the scallop lobe (as the verification measures them), so the model's NDF is
+//! `NDF(O) ⊛ K_scallop`. The opening is taken on the tile rasterised at about a 24th of the ball radius,
+//! periodic, so a round costs a fraction of a second instead of a simulation of the program.
+
+use crate::facets::{self, Tile};
+use crate::heightfield::Heightfield;
+use crate::tool::Shape;
+
+/// Samples per ball radius of the model's grid (its pitch is the facet side over a whole number of
+/// samples no coarser than `r / MODEL_SAMPLES_PER_RADIUS`).
+pub const MODEL_SAMPLES_PER_RADIUS: f64 = 24.0;
+
+/// The model's pitch for a tile and a ball, mm: the facet side split into whole samples of at most
+/// `r / 24`, and never finer than the design's own pitch.
+pub fn model_pitch_mm(tile: &Tile, tool: &Shape) -> f64 {
+    let a = tile.config.facet_mm;
+    let design = tile.heightfield.pitch_mm;
+    let want = (tool.radius_mm() / MODEL_SAMPLES_PER_RADIUS).max(design);
+    a / (a / want - 1e-9).ceil()
+}
+
+/// The periodic opening of `tile` by `tool` on a grid of `pitch_mm` (which must divide the facet side).
+pub fn as_milled(tile: &Tile, tool: &Shape, pitch_mm: f64) -> Heightfield {
+    let mut cfg = tile.config;
+    cfg.pitch_um = pitch_mm * 1000.0;
+    let mut hf = facets::rasterise(&tile.arrangement, &tile.z_mm, &cfg);
+    hf.z_mm = crate::morphology::opening(&hf.z_mm, hf.nx, hf.ny, hf.pitch_mm, true, tool);
+    hf
+}
+
+/// Fraction of the model's samples the ball cannot reach: the opening above the design by more than
+/// [`crate::morphology::REACH_TOLERANCE_UM`] (the design rasterised on the same grid).
+pub fn unreachable_fraction(tile: &Tile, opened: &Heightfield) -> f64 {
+    let mut cfg = tile.config;
+    cfg.pitch_um = opened.pitch_mm * 1000.0;
+    let design = facets::rasterise(&tile.arrangement, &tile.z_mm, &cfg);
+    let tol = crate::morphology::REACH_TOLERANCE_UM * 1e-3;
+    let n = design
+        .z_mm
+        .iter()
+        .zip(&opened.z_mm)
+        .filter(|(d, o)| **o > **d + tol)
+        .count();
+    n as f64 / design.z_mm.len().max(1) as f64
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::brdf::Brdf;
+    use crate::ndf::{self, NdfConfig};
+
+    #[test]
+    fn the_opening_keeps_planes_and_fills_concave_corners_only() {
+        let n = ndf::run(
+            &NdfConfig {
+                res: 64,
+                ..Default::default()
+            },
+            &Brdf::parse("beckmann:alpha=0.2").unwrap(),
+            None,
+        )
+        .unwrap();
+        let cfg = facets::FacetsConfig {
+            facets_x: 6,
+            facets_y: 6,
+            facet_mm: 1.0,
+            pitch_um: 10.0,
+            ..Default::default()
+        };
+        let tile = facets::run(&cfg, &n.target).unwrap();
+        let tool = Shape::Ball { diameter_mm: 0.5 };
+        let p = model_pitch_mm(&tile, &tool);
+        assert!((p - 1.0 / 96.0).abs() < 1e-12, "{p}");
+        let o = as_milled(&tile, &tool, p);
+        let mut c = tile.config;
+        c.pitch_um = p * 1000.0;
+        let d = facets::rasterise(&tile.arrangement, &tile.z_mm, &c);
+        // an opening never cuts below the surface, and leaves facet centres (a ball fits on a plane) alone
+        assert!(o.z_mm.iter().zip(&d.z_mm).all(|(o, d)| *o >= d - 1e-12));
+        let m = 96;
+        for fy in 0..6 {
+            for fx in 0..6 {
+                let (i, j) = (fx * m + m / 2, fy * m + m / 2);
+                assert!((o.at(i, j) - d.at(i, j)).abs() < 1e-9, "facet ({fx},{fy}) centre moved");
+            }
+        }
+        let u = unreachable_fraction(&tile, &o);
+        assert!(u > 0.0 && u < 0.5, "{u}");
+    }
+}
