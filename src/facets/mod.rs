@@ -21,6 +21,7 @@ pub(crate) mod arrange;
 pub mod format;
 pub(crate) mod poisson;
 pub(crate) mod sampling;
+pub(crate) mod steps;
 pub mod stl;
 
 pub use arrange::{AnnealConfig, AnnealReport, Arrangement, Energy};
