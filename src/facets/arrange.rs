@@ -446,11 +446,10 @@ mod tests {
             let (p, q) = (a.p.clone(), a.q.clone());
             if let Some(t) = a.terms.as_mut() {
                 let (psi, zeta) = t.fields();
-                let (psi, zeta) = (psi.to_vec(), zeta.to_vec());
                 t.refresh(&p, &q);
                 let (psi2, zeta2) = t.fields();
-                prop_assert!(psi.iter().zip(psi2).all(|(x, y)| (x - y).abs() < 1e-9));
-                prop_assert!(zeta.iter().zip(zeta2).all(|(x, y)| (x - y).abs() < 1e-9));
+                prop_assert!(psi.iter().zip(&psi2).all(|(x, y)| (x - y).abs() < 1e-9));
+                prop_assert!(zeta.iter().zip(&zeta2).all(|(x, y)| (x - y).abs() < 1e-9));
             }
         }
     }
@@ -490,17 +489,84 @@ mod tests {
     fn anneal_timing() {
         for (w, h) in [(12usize, 12usize), (32, 32)] {
             let s = slopes(w * h, 3);
-            let cfg = AnnealConfig::default();
-            let mut a = Arrangement::new(w, h, &s, 0.02);
-            let t = std::time::Instant::now();
-            let r = anneal(&mut a, &cfg, &mut rand_pcg::Pcg64Mcg::seed_from_u64(1));
-            println!(
-                "N = {}: {:.2} s, accepted {:.3} of {} proposals",
-                w * h,
-                t.elapsed().as_secs_f64(),
-                r.accepted as f64 / r.proposals as f64,
-                r.proposals
-            );
+            for (sw, rw) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0)] {
+                let cfg = AnnealConfig {
+                    step_weight: sw,
+                    relief_weight: rw,
+                    ..Default::default()
+                };
+                let mut a = Arrangement::new(w, h, &s, 0.02);
+                let t = std::time::Instant::now();
+                let r = anneal(&mut a, &cfg, &mut rand_pcg::Pcg64Mcg::seed_from_u64(1));
+                println!(
+                    "N = {}, step_weight {sw}, relief_weight {rw}: {:.2} s, accepted {:.3} of {} proposals",
+                    w * h,
+                    t.elapsed().as_secs_f64(),
+                    r.accepted as f64 / r.proposals as f64,
+                    r.proposals
+                );
+            }
+        }
+    }
+
+    /// The measurement behind the default `step_weight` (prints a table; asserts nothing):
+    /// `cargo test --lib facets::arrange::tests::step_weight_table -- --ignored --nocapture`.
+    /// Env `WEIGHTS="0 1"`, `RELIEF="0 0.1"` override the weights tried.
+    #[test]
+    #[ignore]
+    fn step_weight_table() {
+        use crate::{brdf::Brdf, facets, ndf};
+        let list = |var: &str, def: &str| -> Vec<f64> {
+            let s = std::env::var(var).unwrap_or_else(|_| def.into());
+            s.split_whitespace().map(|v| v.parse().unwrap()).collect()
+        };
+        let n = ndf::run(
+            &ndf::NdfConfig::default(),
+            &Brdf::parse("beckmann:alpha=0.2").unwrap(),
+            None,
+        )
+        .unwrap();
+        println!("step_w relief_w seed | rms_um relief_um C valleys steps_sq | s");
+        for rw in list("RELIEF", "0") {
+            for sw in list("WEIGHTS", "0 0.3 1 3 10") {
+                let mut sum = [0.0; 5];
+                for seed in 1..=5u64 {
+                    let mut cfg = facets::FacetsConfig {
+                        facets_x: 12,
+                        facets_y: 12,
+                        facet_mm: 1.0,
+                        pitch_um: 50.0,
+                        seed,
+                        ..Default::default()
+                    };
+                    cfg.anneal.step_weight = sw;
+                    cfg.anneal.relief_weight = rw;
+                    let t0 = std::time::Instant::now();
+                    let t = facets::run(&cfg, &n.target).unwrap();
+                    let e = t.anneal.energy;
+                    let row = [
+                        t.seams.rms_um,
+                        -t.heightfield.range().0 * 1000.0,
+                        e.C,
+                        e.valleys,
+                        e.steps_sq,
+                    ];
+                    println!(
+                        "{sw:5} {rw:5} {seed} | {:7.2} {:7.1} {:.4} {:4} {:.4} | {:.2}",
+                        row[0],
+                        row[1],
+                        row[2],
+                        row[3],
+                        row[4],
+                        t0.elapsed().as_secs_f64()
+                    );
+                    sum.iter_mut().zip(row).for_each(|(s, r)| *s += r / 5.0);
+                }
+                println!(
+                    "{sw:5} {rw:5} mean | {:7.2} {:7.1} {:.4} {:5.1} {:.4}",
+                    sum[0], sum[1], sum[2], sum[3], sum[4]
+                );
+            }
         }
     }
 }

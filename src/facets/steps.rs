@@ -108,60 +108,130 @@ pub(crate) fn relief(a: &super::Arrangement, facet: f64) -> f64 {
     hi - lo
 }
 
-/// A sparse change of a grid field: at most 8 distinct positions.
-#[derive(Clone, Copy, Debug, Default)]
-struct Sparse {
-    idx: [usize; 8],
-    val: [f64; 8],
-    n: usize,
+/// Stencil of a facet's slope change on the field it drives: `(dx, dy, coefficient)` per unit `δp` (`[0]`) and
+/// unit `δq` (`[1]`), offsets from the facet.
+type Stencil = [&'static [(isize, isize, f64)]; 2];
+
+/// The plaquette curl `c`: a change at facet `(x,y)` moves the plaquettes `(x,y), (x−1,y), (x,y−1), (x−1,y−1)`.
+const CURL: Stencil = [
+    &[(0, 0, 0.5), (-1, 0, 0.5), (0, -1, -0.5), (-1, -1, -0.5)],
+    &[(0, 0, -0.5), (-1, 0, 0.5), (0, -1, -0.5), (-1, -1, 0.5)],
+];
+
+/// The facet divergence `d`: a change at facet `(x,y)` moves its four neighbours, not itself.
+const DIV: Stencil = [&[(1, 0, -0.5), (-1, 0, 0.5)], &[(0, 1, -0.5), (0, -1, 0.5)]];
+
+/// `i + d` on a cycle of `n`.
+#[inline]
+fn wrap(i: usize, d: isize, n: usize) -> usize {
+    (i as isize + d).rem_euclid(n as isize) as usize
 }
 
-impl Sparse {
-    fn add(&mut self, i: usize, v: f64) {
-        match self.idx[..self.n].iter().position(|&k| k == i) {
-            Some(j) => self.val[j] += v,
-            None => {
-                self.idx[self.n] = i;
-                self.val[self.n] = v;
-                self.n += 1;
+/// One quadratic form `xᵀ T x` of a field `x` that facet slopes drive through a stencil, with `f = T x`
+/// maintained. A swap moves `v = (δp, δq)` into facet `a` and `−v` into facet `b`, so everything it needs is
+/// tabulated by facet offset: `K_α = T ∗ σ_α` (the response of `f` to a unit slope change) and
+/// `M_αβ(r) = Σ_j σ_α(j) K_β(j + r)`, with `M_qp(r) = M_pq(−r)` (T symmetric). Then, `r = a − b`,
+/// `δ(xᵀTx) = 2 Σ_α v_α (u_α(a) − u_α(b)) + 2 vᵀ(M(0) − M(r))v` (M symmetrised), `u_α(k) = Σ_s σ_α(s) f(k+s)`,
+/// and on acceptance `f += Σ_α v_α (K_α(· − a) − K_α(· − b))`: four shifted copies, O(4N).
+#[derive(Clone, Debug)]
+struct Quadratic {
+    w: usize,
+    h: usize,
+    stencil: Stencil,
+    /// `K_p, K_q` by offset `dy·w + dx`.
+    kern: [Vec<f64>; 2],
+    /// `M_pp, M_pq, M_qq` by offset.
+    m: [Vec<f64>; 3],
+    /// `f = T x`.
+    field: Vec<f64>,
+}
+
+impl Quadratic {
+    fn new(table: &[f64], stencil: Stencil, w: usize, h: usize) -> Self {
+        let n = w * h;
+        let shifted_sum = |t: &[f64], st: &[(isize, isize, f64)], sign: isize| {
+            let mut out = vec![0.0; n];
+            for &(dx, dy, v) in st {
+                add_shifted(&mut out, t, w, h, (wrap(0, sign * dx, w), wrap(0, sign * dy, h)), v);
             }
+            out
+        };
+        // K_α(j) = Σ_s σ_α(s) T(j − s); M_αβ(r) = Σ_s σ_α(s) K_β(r + s)
+        let kern = [shifted_sum(table, stencil[0], 1), shifted_sum(table, stencil[1], 1)];
+        let m = [
+            shifted_sum(&kern[0], stencil[0], -1),
+            shifted_sum(&kern[1], stencil[0], -1),
+            shifted_sum(&kern[1], stencil[1], -1),
+        ];
+        Self {
+            w,
+            h,
+            stencil,
+            kern,
+            m,
+            field: Vec::new(),
         }
     }
 
-    fn entries(&self) -> impl Iterator<Item = (usize, f64)> + '_ {
-        self.idx[..self.n]
+    #[inline]
+    fn offset(&self, (xa, ya): (usize, usize), (xb, yb): (usize, usize)) -> usize {
+        let dx = if xa >= xb { xa - xb } else { xa + self.w - xb };
+        let dy = if ya >= yb { ya - yb } else { ya + self.h - yb };
+        dy * self.w + dx
+    }
+
+    /// `u_α(k) = Σ_s σ_α(s) f(k + s)`.
+    #[inline]
+    fn drive(&self, alpha: usize, (x, y): (usize, usize)) -> f64 {
+        let (w, h) = (self.w, self.h);
+        self.stencil[alpha]
             .iter()
-            .copied()
-            .zip(self.val[..self.n].iter().copied())
+            .map(|&(dx, dy, v)| v * self.field[wrap(y, dy, h) * w + wrap(x, dx, w)])
+            .sum()
+    }
+
+    /// The change of the form when `v = (dp, dq)` moves into facet `a` and out of facet `b` (`a ≠ b`).
+    fn change(&self, a: (usize, usize), b: (usize, usize), (dp, dq): (f64, f64)) -> f64 {
+        let lin = dp * (self.drive(0, a) - self.drive(0, b)) + dq * (self.drive(1, a) - self.drive(1, b));
+        let (r, rn) = (self.offset(a, b), self.offset(b, a));
+        let [pp, pq, qq] = &self.m;
+        let quad = dp * dp * (pp[0] - pp[r]) + dp * dq * (2.0 * pq[0] - pq[r] - pq[rn]) + dq * dq * (qq[0] - qq[r]);
+        2.0 * lin + 2.0 * quad
+    }
+
+    /// Apply the move to `f`.
+    fn commit(&mut self, a: (usize, usize), b: (usize, usize), (dp, dq): (f64, f64)) {
+        let (w, h) = (self.w, self.h);
+        for (alpha, v) in [(0, dp), (1, dq)] {
+            add_shifted(&mut self.field, &self.kern[alpha], w, h, a, v);
+            add_shifted(&mut self.field, &self.kern[alpha], w, h, b, -v);
+        }
     }
 }
 
-/// A swap whose energy change was returned but whose ψ, ζ update is not yet applied.
+/// A swap whose energy change was returned but whose field update is not yet applied.
 #[derive(Clone, Copy, Debug)]
 struct Pending {
-    a: usize,
-    b: usize,
-    dc: Sparse,
-    dd: Sparse,
+    a: (usize, usize),
+    b: (usize, usize),
+    /// `(δp, δq)` into `a`.
+    v: (f64, f64),
     /// The weighted energy change it returned.
     delta: f64,
 }
 
-/// The incrementally maintained S and R terms of one arrangement (only built when a weight is non-zero).
+/// The incrementally maintained S and R terms of one arrangement (built only when a weight is non-zero; a
+/// term whose weight is 0 has no tables and costs nothing).
 #[derive(Clone, Debug)]
 pub(crate) struct StepTerms {
     w: usize,
     h: usize,
     step_weight: f64,
     relief_weight: f64,
-    /// `G = (−L)⁻¹` by offset (empty when `step_weight` is 0).
-    green: Vec<f64>,
-    /// `G² = L⁻²` by offset (empty when `relief_weight` is 0).
-    green2: Vec<f64>,
-    /// `ψ = G c` per plaquette.
-    psi: Vec<f64>,
-    /// `ζ = G² d` per facet.
-    zeta: Vec<f64>,
+    /// `cᵀGc` on the plaquettes, `f = ψ`.
+    steps: Option<Quadratic>,
+    /// `dᵀG²d` on the facets, `f = ζ`.
+    heights: Option<Quadratic>,
     pending: Option<Pending>,
 }
 
@@ -174,122 +244,78 @@ impl StepTerms {
             h,
             step_weight,
             relief_weight,
-            green: if step_weight != 0.0 { g } else { Vec::new() },
-            green2: if relief_weight != 0.0 { g2 } else { Vec::new() },
-            psi: Vec::new(),
-            zeta: Vec::new(),
+            steps: (step_weight != 0.0).then(|| Quadratic::new(&g, CURL, w, h)),
+            heights: (relief_weight != 0.0).then(|| Quadratic::new(&g2, DIV, w, h)),
             pending: None,
         };
         t.refresh(p, q);
         t
     }
 
-    /// Recompute ψ and ζ from the slopes (after a shuffle, or to shed rounding drift); drops a pending update,
-    /// which the slopes already contain.
+    /// Recompute ψ and ζ from the slopes by FFT (after a shuffle, or to shed rounding drift); drops a pending
+    /// update, which the slopes already contain.
     pub(crate) fn refresh(&mut self, p: &[f64], q: &[f64]) {
         let (w, h) = (self.w, self.h);
         let (c, d) = curl_and_divergence(p, q, w, h);
-        // ψ = G c = −L⁻¹c, ζ = L⁻²d, by FFT in O(N log N)
-        self.psi = if self.green.is_empty() {
-            Vec::new()
-        } else {
-            solve_periodic(w, h, &c).iter().map(|v| -v).collect()
-        };
-        self.zeta = if self.green2.is_empty() {
-            Vec::new()
-        } else {
-            solve_periodic(w, h, &solve_periodic(w, h, &d))
-        };
-        self.pending = None;
-    }
-
-    /// The table offset index of position `i` relative to `j`.
-    #[inline]
-    fn offset(&self, i: usize, j: usize) -> usize {
-        let (w, h) = (self.w, self.h);
-        let dx = (i % w + w - j % w) % w;
-        let dy = (i / w + h - j / w) % h;
-        dy * w + dx
-    }
-
-    /// `2 δᵀf + δᵀ T δ`: the change of `xᵀTx` when `x += δ`, with `f = T x`.
-    fn quadratic_change(&self, table: &[f64], field: &[f64], delta: &Sparse) -> f64 {
-        let mut s = 0.0;
-        for (i, vi) in delta.entries() {
-            s += 2.0 * vi * field[i];
-            for (j, vj) in delta.entries() {
-                s += vi * vj * table[self.offset(i, j)];
-            }
+        if let Some(s) = self.steps.as_mut() {
+            // ψ = G c = −L⁻¹c
+            s.field = solve_periodic(w, h, &c).iter().map(|v| -v).collect();
         }
-        s
+        if let Some(r) = self.heights.as_mut() {
+            // ζ = L⁻²d
+            r.field = solve_periodic(w, h, &solve_periodic(w, h, &d));
+        }
+        self.pending = None;
     }
 
     /// Apply the pending update, if any: `ψ += G δc`, `ζ += G² δd`.
     pub(crate) fn commit(&mut self) {
         if let Some(pd) = self.pending.take() {
-            let (w, h) = (self.w, self.h);
-            if !self.green.is_empty() {
-                pd.dc
-                    .entries()
-                    .for_each(|(i, v)| add_shifted(&mut self.psi, &self.green, w, h, i, v));
-            }
-            if !self.green2.is_empty() {
-                pd.dd
-                    .entries()
-                    .for_each(|(i, v)| add_shifted(&mut self.zeta, &self.green2, w, h, i, v));
+            for f in [self.steps.as_mut(), self.heights.as_mut()].into_iter().flatten() {
+                f.commit(pd.a, pd.b, pd.v);
             }
         }
     }
 
-    /// The weighted change `step_weight·δ(S/a²) + relief_weight·δ(Σz²/a²)` of swapping facets `a` and `b`,
+    /// The weighted change `step_weight·δ(S/a²) + relief_weight·δ(Σz²/a²)` of swapping facets `a ≠ b`,
     /// where the slopes at `a` change by `(dp, dq)` and those at `b` by `(−dp, −dq)`. Call it once per swap
     /// (the caller swaps the slopes); swapping the same pair again undoes the pending change for free.
     pub(crate) fn swap(&mut self, a: usize, b: usize, dp: f64, dq: f64) -> f64 {
-        if let Some(pd) = self.pending {
+        let w = self.w;
+        let (a, b) = ((a % w, a / w), (b % w, b / w));
+        if let Some(pd) = &self.pending {
             if (pd.a, pd.b) == (a, b) || (pd.a, pd.b) == (b, a) {
+                let delta = pd.delta;
                 self.pending = None;
-                return -pd.delta;
+                return -delta;
             }
         }
         self.commit();
-        let (w, h) = (self.w, self.h);
-        let (mut dc, mut dd) = (Sparse::default(), Sparse::default());
-        for (k, sp, sq) in [(a, dp, dq), (b, -dp, -dq)] {
-            let (x, y) = (k % w, k / w);
-            let (xl, xr, yd, yu) = ((x + w - 1) % w, (x + 1) % w, (y + h - 1) % h, (y + 1) % h);
-            dc.add(y * w + x, 0.5 * (sp - sq));
-            dc.add(y * w + xl, 0.5 * (sp + sq));
-            dc.add(yd * w + x, -0.5 * (sp + sq));
-            dc.add(yd * w + xl, 0.5 * (sq - sp));
-            dd.add(y * w + xr, -0.5 * sp);
-            dd.add(y * w + xl, 0.5 * sp);
-            dd.add(yu * w + x, -0.5 * sq);
-            dd.add(yd * w + x, 0.5 * sq);
-        }
+        let v = (dp, dq);
         let mut delta = 0.0;
-        if !self.green.is_empty() {
-            delta += self.step_weight * self.quadratic_change(&self.green, &self.psi, &dc);
+        if let Some(s) = &self.steps {
+            delta += self.step_weight * s.change(a, b, v);
         }
-        if !self.green2.is_empty() {
-            delta += self.relief_weight * self.quadratic_change(&self.green2, &self.zeta, &dd);
+        if let Some(r) = &self.heights {
+            delta += self.relief_weight * r.change(a, b, v);
         }
-        self.pending = Some(Pending { a, b, dc, dd, delta });
+        self.pending = Some(Pending { a, b, v, delta });
         delta
     }
 
-    /// `(ψ, ζ)` with the pending update applied (for tests).
+    /// `(ψ, ζ)` with the pending update applied (empty when off; for tests).
     #[cfg(test)]
-    pub(crate) fn fields(&mut self) -> (&[f64], &[f64]) {
+    pub(crate) fn fields(&mut self) -> (Vec<f64>, Vec<f64>) {
         self.commit();
-        (&self.psi, &self.zeta)
+        let f = |q: &Option<Quadratic>| q.as_ref().map_or(Vec::new(), |q| q.field.clone());
+        (f(&self.steps), f(&self.heights))
     }
 }
 
-/// `field += v · T(· − i)`: one shifted copy of the table, row by row in two contiguous runs.
-fn add_shifted(field: &mut [f64], table: &[f64], w: usize, h: usize, i: usize, v: f64) {
-    let (xi, yi) = (i % w, i / w);
+/// `field += v · T(· − (xi, yi))`: one shifted copy of the table, row by row in two contiguous runs.
+fn add_shifted(field: &mut [f64], table: &[f64], w: usize, h: usize, (xi, yi): (usize, usize), v: f64) {
     for y in 0..h {
-        let dy = (y + h - yi) % h;
+        let dy = if y >= yi { y - yi } else { y + h - yi };
         let t = &table[dy * w..(dy + 1) * w];
         let f = &mut field[y * w..(y + 1) * w];
         let (f_lo, f_hi) = f.split_at_mut(xi);
