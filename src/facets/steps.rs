@@ -24,11 +24,12 @@
 //! `Σ z²/a² = dᵀ G² d`, `G² = L⁻²` (zero mode removed).
 //!
 //! Both Green's functions are translation invariant: one table of N values each, `T(dx, dy)` at index
-//! `dy·W + dx`. A swap changes `(p, q)` at two facets; a change `(δp, δq)` at facet `(x,y)` changes `c` at the
-//! four plaquettes around it — `(x,y)` by `½(δp − δq)`, `(x−1,y)` by `½(δp + δq)`, `(x,y−1)` by `−½(δp + δq)`,
-//! `(x−1,y−1)` by `½(δq − δp)` — and `d` at its four neighbours (not at itself): `(x±1,y)` by `∓½δp`,
-//! `(x,y±1)` by `∓½δq`. With `ψ = G c` maintained, `δS/a² = 2 δcᵀψ + δcᵀ G δc` (≤ 8 entries, ≤ 64 table
-//! look-ups), and on acceptance `ψ += G δc` (O(8N)); `ζ = G² d` the same way.
+//! `dy·W + dx`. A change `(δp, δq)` at facet `(x,y)` changes `c` at the four plaquettes around it — `(x,y)` by
+//! `½(δp − δq)`, `(x−1,y)` by `½(δp + δq)`, `(x,y−1)` by `−½(δp + δq)`, `(x−1,y−1)` by `½(δq − δp)` — and `d`
+//! at its four neighbours (not at itself): `(x±1,y)` by `∓½δp`, `(x,y±1)` by `∓½δq`. With `ψ = G c`
+//! maintained, `δS/a² = 2 δcᵀψ + δcᵀ G δc`; since a swap moves `(δp, δq)` into one facet and out of another,
+//! the stencils are folded into per-facet tables (`Quadratic`): a proposal costs about 16 look-ups, an
+//! accepted swap `ψ += G δc` four shifted table copies, O(4N). `ζ = G² d` the same way.
 //!
 //! The update of ψ and ζ is deferred: [`StepTerms::swap`] leaves the change pending, and the next swap either
 //! undoes it (the same pair again: the annealer's rejection, which then costs nothing) or commits it first.
