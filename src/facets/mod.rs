@@ -22,6 +22,7 @@ pub mod format;
 pub(crate) mod poisson;
 pub(crate) mod relief;
 pub(crate) mod sampling;
+pub(crate) mod steps;
 pub mod stl;
 
 pub use arrange::{AnnealConfig, AnnealReport, Arrangement, Energy};
