@@ -147,6 +147,7 @@ pub fn run(
     let mut scale = [1.0, 1.0];
     let aim = n.target.within_cone(cone_tan);
     let mut first: Option<Tile> = None;
+    let mut history: Vec<([f64; 2], [f64; 2])> = vec![];
     let mut rounds: Vec<Round> = vec![];
     let mut best: Option<(Tile, SlopeGrid)> = None;
     let mut chosen = 0;
@@ -162,7 +163,8 @@ pub fn run(
         on_round(&round);
         let better = rounds.get(chosen).is_none_or(|b| round.score < b.score);
         let done = round.score <= cfg.stop_fraction;
-        let next = update::next_scale(scale, round.cov_ratio, cfg.gain);
+        history.push((scale, round.cov_ratio));
+        let next = update::next_scale(&history, cfg.gain);
         rounds.push(round);
         if better {
             chosen = k;

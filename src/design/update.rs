@@ -3,9 +3,9 @@
 //! What the bit adds to a tile is mostly slope variance: the ball's fillets at the foot of every step
 //! between facets and in every concave corner carry slopes the facets do not have, and the steps grow with
 //! the facet slopes. So the aim is the target NDF `T` with its slopes scaled per axis,
-//! `A(p, q) = T(p/cx, q/cy) / (cx·cy)`, and each round moves the scales by the model's variance ratio,
-//! `c ← c · ρ^(−γ/2)` with `ρ` the as-milled model's slope variance over the target's along that axis and
-//! `γ` the gain. The facets are sampled and arranged once, from `T`; later rounds scale that arrangement's
+//! `A(p, q) = T(p/cx, q/cy) / (cx·cy)`, and each round moves the scales by the model's variance ratio `ρ`
+//! (the as-milled model's slope variance over the target's along that axis): first `c ← c · ρ^(−γ/2)`, then
+//! by the secant through the last two rounds ([`next_scale`]), `γ` the gain. The facets are sampled and arranged once, from `T`; later rounds scale that arrangement's
 //! slopes (`facets::rescaled`), so the order of the facets is kept, the heights and steps scale by `c`,
 //! and the variance the bit adds by about `c²`: the iteration then reaches the fixed point
 //! `c² (σ²_design + σ²_tool) = σ²_target` in a round or two. (Re-sampling and re-annealing each round
@@ -29,16 +29,40 @@ pub fn scaled(target: &SlopeGrid, scale: [f64; 2], cone_tan: f64) -> SlopeGrid {
     g
 }
 
-/// The next scales: `c · ρ^(−gain/2)` per axis, each step limited to a factor of 1.5 either way.
-pub fn next_scale(scale: [f64; 2], cov_ratio: [f64; 2], gain: f64) -> [f64; 2] {
-    let f = |c: f64, r: f64| {
-        if r.is_finite() && r > 0.0 {
-            c * r.powf(-0.5 * gain).clamp(1.0 / 1.5, 1.5)
-        } else {
-            c
-        }
+/// The next scales from the rounds so far (`(scale, variance ratio)` per round, newest last), per axis.
+/// The first step is `c · ρ^(−gain/2)`, which assumes all the variance scales with `c²`. From the second on,
+/// the last two rounds fit `ρ = α c² + β` (what scales, and what the bit adds whatever the slopes: the
+/// scallops' and polish's share the lobe does not carry exactly, fillets fed by the other axis's steps) and
+/// the secant step aims at `ρ = 1`, `c² = (1 − β)/α`, damped by the gain; it falls back to the first rule
+/// when the fit is degenerate. Each step is limited to a factor of 1.5 either way.
+pub fn next_scale(history: &[([f64; 2], [f64; 2])], gain: f64) -> [f64; 2] {
+    let Some(&(scale, ratio)) = history.last() else {
+        return [1.0, 1.0];
     };
-    [f(scale[0], cov_ratio[0]), f(scale[1], cov_ratio[1])]
+    let prev = history.len().checked_sub(2).map(|k| history[k]);
+    let axis = |a: usize| -> f64 {
+        let (c, r) = (scale[a], ratio[a]);
+        if !(r.is_finite() && r > 0.0) {
+            return c;
+        }
+        let power = c * r.powf(-0.5 * gain);
+        let secant = prev.and_then(|(ps, pr)| {
+            let (c0, r0) = (ps[a], pr[a]);
+            let dc2 = c * c - c0 * c0;
+            if dc2.abs() < 1e-6 * c * c || !r0.is_finite() {
+                return None;
+            }
+            let alpha = (r - r0) / dc2;
+            let beta = r - alpha * c * c;
+            let c2 = (1.0 - beta) / alpha;
+            (alpha > 0.0 && c2 > 0.0).then(|| {
+                let target = c2.sqrt();
+                c + gain * (target - c)
+            })
+        });
+        secant.unwrap_or(power).clamp(c / 1.5, c * 1.5)
+    };
+    [axis(0), axis(1)]
 }
 
 #[cfg(test)]
@@ -66,12 +90,15 @@ mod tests {
         // scales must reach σ²_model = σ²_target along both axes
         let (target_var, add) = (0.02, 0.003);
         let model = |c: f64| c * c * target_var * 1.2 + add;
+        let mut history = vec![];
         let mut scale = [1.0, 1.0];
-        for _ in 0..6 {
+        for _ in 0..3 {
             let r = model(scale[0]) / target_var;
-            scale = next_scale(scale, [r, r], 1.0);
+            history.push((scale, [r, r]));
+            scale = next_scale(&history, 1.0);
         }
+        // the model is exactly α c² + β, so the secant lands on it at the third round
         let r = model(scale[0]) / target_var;
-        assert!((r - 1.0).abs() < 0.01, "variance ratio after 6 rounds {r}");
+        assert!((r - 1.0).abs() < 1e-9, "variance ratio after 3 rounds {r}");
     }
 }

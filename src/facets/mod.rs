@@ -188,6 +188,15 @@ impl FacetsConfig {
                 format!("must be a length ≥ 0 in mm (0: unbounded), got {}", self.max_relief_mm),
             );
         }
+        for (field, v) in [
+            ("anneal.step_weight", self.anneal.step_weight),
+            ("anneal.relief_weight", self.anneal.relief_weight),
+            ("anneal.valley_weight", self.anneal.valley_weight),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return bad(field, format!("must be a weight ≥ 0, got {v}"));
+            }
+        }
         if self.lloyd_iterations > 10_000 {
             return bad(
                 "lloyd_iterations",

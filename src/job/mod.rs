@@ -184,6 +184,7 @@ impl Job {
             None => return Err(invalid(format!("missing `version` (expected version = {VERSION})"))),
         }
         let cap_given = raw.get("facets").and_then(|f| f.get("max_slope_deg")).is_some();
+        let relief_given = raw.get("facets").and_then(|f| f.get("max_relief_mm")).is_some();
         let mut job: Job = if overrides.is_empty() {
             // from the text, so an error names its line and column
             toml::from_str(&text).map_err(|e| invalid(e.to_string()))?
@@ -215,10 +216,18 @@ impl Job {
             )));
         }
         job.ndf.validate().map_err(|e| invalid(e.to_string()))?;
+        if !relief_given {
+            job.facets.max_relief_mm = tool_relief_budget(tool, &machine);
+        }
         let slope_cap_from = if cap_given {
             "job (`facets.max_slope_deg`)".to_string()
         } else {
-            let (deg, why) = tool_slope_cap(tool, job.facets.facet_mm, job.ndf.max_angle_deg);
+            let budget = if job.facets.max_relief_mm > 0.0 {
+                job.facets.max_relief_mm
+            } else {
+                tool_relief_budget(tool, &machine)
+            };
+            let (deg, why) = tool_slope_cap(tool, budget, job.facets.facet_mm, job.ndf.max_angle_deg);
             job.facets.max_slope_deg = deg;
             why
         };
@@ -260,33 +269,40 @@ impl Job {
 /// Margin kept between a tile's relief and the finishing tool's flute length, fraction of the flutes.
 pub const FLUTE_MARGIN: f64 = 0.1;
 
-/// The steepest facet the finishing ball can cut, degrees, and why (DESIGN.md §4.4). A ball cuts any slope
-/// below 90° with its side, so its geometry alone sets no limit short of the equator; what limits a facet
-/// is that the flutes must reach its low edge while the shank clears its high edge: one facet of side `a`
-/// and slope `tan θ` rises `a·tan θ` across, so `tan θ ≤ (L − m)/a` with `L` the flute length and `m` a
-/// margin of [`FLUTE_MARGIN`]·L. It is never steeper than the NDF grid reaches (`ndf.max_angle_deg`).
-pub fn tool_slope_cap(tool: &crate::toolpath::machine::Tool, facet_mm: f64, grid_deg: f64) -> (f64, String) {
-    let reach = tool.flute_length_mm * (1.0 - FLUTE_MARGIN);
-    let flutes = (reach / facet_mm).atan().to_degrees();
-    if flutes <= grid_deg {
+/// The relief budget from the finishing tool and the machine, mm: the flutes less [`FLUTE_MARGIN`], never
+/// more than the machine's Z travel less its clearance height (DESIGN.md §4.4).
+pub fn tool_relief_budget(tool: &crate::toolpath::machine::Tool, machine: &Machine) -> f64 {
+    let flutes = tool.flute_length_mm * (1.0 - FLUTE_MARGIN);
+    flutes.min(machine.travel.z_mm - machine.program.clearance_z())
+}
+
+/// The steepest facet the finishing ball can cut within a relief budget, degrees, and why (DESIGN.md §4.4).
+/// A ball cuts any slope below 90° with its side, so its geometry alone sets no limit short of the equator;
+/// what limits a facet is its own height: a square facet of side `a` with slopes `(p, q)` rises
+/// `a(|p| + |q|)` corner to corner, at most `√2·a·tan θ`, and no facet may be taller than the relief the
+/// flutes can cut, so `tan θ ≤ B/(√2·a)`. Never steeper than the NDF grid reaches (`ndf.max_angle_deg`).
+pub fn tool_slope_cap(
+    tool: &crate::toolpath::machine::Tool,
+    budget_mm: f64,
+    facet_mm: f64,
+    grid_deg: f64,
+) -> (f64, String) {
+    let deg = (budget_mm / (std::f64::consts::SQRT_2 * facet_mm)).atan().to_degrees();
+    if deg <= grid_deg {
         (
-            flutes,
+            deg,
             format!(
-                "the tool: `{}`'s flutes of {} mm less {:.0}% over a {} mm facet, atan({:.3}/{}) = {:.1}°",
+                "the tool: a {facet_mm} mm facet at most {budget_mm:.3} mm tall corner to corner (the relief budget: `{}`'s {} mm flutes less {:.0}%), atan({budget_mm:.3}/(√2·{facet_mm})) = {deg:.1}°",
                 tool.id,
                 tool.flute_length_mm,
                 FLUTE_MARGIN * 100.0,
-                facet_mm,
-                reach,
-                facet_mm,
-                flutes
             ),
         )
     } else {
         (
             grid_deg,
             format!(
-                "the NDF grid (`ndf.max_angle_deg` = {grid_deg}°; `{}`'s flutes would allow {flutes:.1}°)",
+                "the NDF grid (`ndf.max_angle_deg` = {grid_deg}°; `{}`'s flutes would allow {deg:.1}°)",
                 tool.id
             ),
         )
