@@ -312,8 +312,8 @@ pub struct AnnealConfig {
     pub random_baselines: usize,
     /// Weight of the step term S = Σ step²/a² (dimensionless, comparable with C).
     ///
-    /// Default 1, measured on Beckmann α = 0.2, 12×12 facets of 1 mm, seeds 1–5 (means; test
-    /// `step_weight_table`):
+    /// Default 1, measured on Beckmann α = 0.2, 12×12 facets of 1 mm, seeds 1–5 (means;
+    /// `cargo run --release --example bench_anneal -- table`):
     ///
     /// | step_weight | rms step µm | relief µm | C     | valleys |
     /// |-------------|-------------|-----------|-------|---------|
@@ -504,95 +504,5 @@ mod tests {
         let mut sorted = i1.clone();
         sorted.sort();
         assert_eq!(sorted, (0..256).collect::<Vec<_>>());
-    }
-
-    /// Annealing wall time at N = 144 and N = 1024 with the default schedule (prints; no assertion on time).
-    /// `cargo test --lib facets::arrange::tests::anneal_timing -- --ignored --nocapture`
-    #[test]
-    #[ignore]
-    fn anneal_timing() {
-        for (w, h) in [(12usize, 12usize), (32, 32)] {
-            let s = slopes(w * h, 3);
-            for (sw, rw) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0)] {
-                let cfg = AnnealConfig {
-                    step_weight: sw,
-                    relief_weight: rw,
-                    ..Default::default()
-                };
-                let mut a = Arrangement::new(w, h, &s, 0.02);
-                let t = std::time::Instant::now();
-                let r = anneal(&mut a, &cfg, &mut rand_pcg::Pcg64Mcg::seed_from_u64(1));
-                println!(
-                    "N = {}, step_weight {sw}, relief_weight {rw}: {:.2} s, accepted {:.3} of {} proposals",
-                    w * h,
-                    t.elapsed().as_secs_f64(),
-                    r.accepted as f64 / r.proposals as f64,
-                    r.proposals
-                );
-            }
-        }
-    }
-
-    /// The measurement behind the default `step_weight` (prints a table; asserts nothing):
-    /// `cargo test --lib facets::arrange::tests::step_weight_table -- --ignored --nocapture`.
-    /// Env `WEIGHTS="0 1"`, `RELIEF="0 0.1"` override the weights tried.
-    #[test]
-    #[ignore]
-    fn step_weight_table() {
-        use crate::{brdf::Brdf, facets, ndf};
-        let list = |var: &str, def: &str| -> Vec<f64> {
-            let s = std::env::var(var).unwrap_or_else(|_| def.into());
-            s.split_whitespace().map(|v| v.parse().unwrap()).collect()
-        };
-        let n = ndf::run(
-            &ndf::NdfConfig::default(),
-            &Brdf::parse("beckmann:alpha=0.2").unwrap(),
-            None,
-        )
-        .unwrap();
-        println!("step_w relief_w seed | rms_um relief_um C valleys steps_sq heights_sq | s");
-        for rw in list("RELIEF", "0") {
-            for sw in list("WEIGHTS", "0 0.3 1 3 10") {
-                let mut sum = [0.0; 6];
-                for seed in 1..=5u64 {
-                    let mut cfg = facets::FacetsConfig {
-                        facets_x: 12,
-                        facets_y: 12,
-                        facet_mm: 1.0,
-                        pitch_um: 50.0,
-                        seed,
-                        ..Default::default()
-                    };
-                    cfg.anneal.step_weight = sw;
-                    cfg.anneal.relief_weight = rw;
-                    let t0 = std::time::Instant::now();
-                    let t = facets::run(&cfg, &n.target).unwrap();
-                    let e = t.anneal.energy;
-                    let row = [
-                        t.seams.rms_um,
-                        -t.heightfield.range().0 * 1000.0,
-                        e.C,
-                        e.valleys,
-                        e.steps_sq,
-                        e.heights_sq,
-                    ];
-                    println!(
-                        "{sw:5} {rw:5} {seed} | {:7.2} {:7.1} {:.4} {:4} {:.4} {:.2} | {:.2}",
-                        row[0],
-                        row[1],
-                        row[2],
-                        row[3],
-                        row[4],
-                        row[5],
-                        t0.elapsed().as_secs_f64()
-                    );
-                    sum.iter_mut().zip(row).for_each(|(s, r)| *s += r / 5.0);
-                }
-                println!(
-                    "{sw:5} {rw:5} mean | {:7.2} {:7.1} {:.4} {:5.1} {:.4} {:.2}",
-                    sum[0], sum[1], sum[2], sum[3], sum[4], sum[5]
-                );
-            }
-        }
     }
 }
