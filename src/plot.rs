@@ -520,7 +520,8 @@ impl LinePlot {
         cv.text(left + pw / 2, top + ph + 30, &self.x_label, Alignment::Center);
         cv.text(4, top - 8, &self.y_label, Alignment::Left);
         cv.text(left + pw / 2, 14, &self.title, Alignment::Center);
-        for (k, s) in self.series.iter().enumerate() {
+        let mut entry = 0;
+        for s in &self.series {
             let mut prev: Option<(i32, i32)> = None;
             let mut step = 0usize;
             for p in &s.points {
@@ -538,10 +539,13 @@ impl LinePlot {
                 }
                 prev = Some(cur);
             }
-            // legend
-            let ly = top + 12 + 14 * k as i32;
-            draw_line_color(&mut cv, (left + pw - 150, ly - 3), (left + pw - 130, ly - 3), s.color);
-            cv.text(left + pw - 125, ly, &s.label, Alignment::Left);
+            // legend (a series without a label continues the one before it)
+            if !s.label.is_empty() {
+                let ly = top + 12 + 14 * entry;
+                draw_line_color(&mut cv, (left + pw - 150, ly - 3), (left + pw - 130, ly - 3), s.color);
+                cv.text(left + pw - 125, ly, &s.label, Alignment::Left);
+                entry += 1;
+            }
         }
         cv
     }

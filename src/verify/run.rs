@@ -330,22 +330,25 @@ fn milled_ndf(cfg: &VerifyConfig, input: &VerifyInput) -> Result<(SlopeGrid, f64
 fn convergence(rounds: &[crate::design::Round], metrics: &Metrics, tol: &Tolerances) -> Figure {
     use crate::plot::{LinePlot, Series, PALETTE};
     let n = rounds.len() as f64;
+    // percent off the target's variance, so the band and the rounds share a readable scale
+    let pct = |v: f64| (v - 1.0) * 100.0;
     let pts = |k: usize| {
         rounds
             .iter()
-            .map(|r| (r.round as f64, r.cov_ratio[k]))
+            .map(|r| (r.round as f64, pct(r.cov_ratio[k])))
             .collect::<Vec<_>>()
     };
-    let band = |v: f64| vec![(0.8, v), (n + 0.2, v)];
+    let band = |v: f64| vec![(0.8, pct(v)), (n + 0.2, pct(v))];
     let chosen = rounds
         .iter()
         .min_by(|a, b| a.score.total_cmp(&b.score))
         .map(|r| r.round as f64)
         .unwrap_or(1.0);
+    let mark = |v: f64| vec![(chosen - 0.15, pct(v)), (chosen + 0.15, pct(v))];
     let plot = LinePlot {
-        title: "design rounds: slope variance ratio".into(),
+        title: "design rounds: slope variance off the target's".into(),
         x_label: "round".into(),
-        y_label: "variance / target".into(),
+        y_label: "% off the target's variance".into(),
         series: vec![
             Series {
                 label: "model x".into(),
@@ -360,14 +363,14 @@ fn convergence(rounds: &[crate::design::Round], metrics: &Metrics, tol: &Toleran
                 dashed: false,
             },
             Series {
-                label: "milled x".into(),
-                points: vec![(chosen, metrics.milled.cov_ratio[0])],
+                label: "milled x (G-code)".into(),
+                points: mark(metrics.milled.cov_ratio[0]),
                 color: PALETTE[0],
                 dashed: true,
             },
             Series {
-                label: "milled y".into(),
-                points: vec![(chosen, metrics.milled.cov_ratio[1])],
+                label: "milled y (G-code)".into(),
+                points: mark(metrics.milled.cov_ratio[1]),
                 color: PALETTE[1],
                 dashed: true,
             },
@@ -384,7 +387,7 @@ fn convergence(rounds: &[crate::design::Round], metrics: &Metrics, tol: &Toleran
                 dashed: true,
             },
         ],
-        size_px: (420, 240),
+        size_px: (460, 260),
         log_y: false,
     };
     let rows: Vec<String> = rounds
@@ -399,7 +402,7 @@ fn convergence(rounds: &[crate::design::Round], metrics: &Metrics, tol: &Toleran
     Figure {
         title: "Design rounds".into(),
         caption: format!(
-            "Each round models what the ball leaves of the tile (its opening of the periodic tile, convolved with the scallop lobe) and scales the facet slopes so the model's variance meets the target's. The dashed marks are the simulated G-code of the chosen round (round {chosen}). {}.",
+            "Each round models what the ball leaves of the tile (its opening of the periodic tile, convolved with the scallop lobe) and scales the facet slopes so the model's variance meets the target's. The short dashed marks are the simulated G-code of the chosen round (round {chosen}), the grey lines the tolerance band. {}.",
             rows.join("; ")
         ),
         png: plot.render().to_png(),
