@@ -36,6 +36,25 @@ pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) 
             ),
         ),
         (
+            "steepest facet".into(),
+            format!(
+                "{:.1}°, from {}; {:.2}% of the target NDF's mass lies beyond it (dropped from the facets)",
+                job.facets.max_slope_deg,
+                ready.slope_cap_from,
+                tile.sampling.steep_mass * 100.0
+            ),
+        ),
+        ("relief".into(), relief_line(job, tile)),
+        (
+            "steps between facets".into(),
+            format!(
+                "{:.1} µm rms, {:.1} µm at most (annealed with the exact step term, weight {})",
+                tile.seams.rms_um,
+                tile.seams.max_interior_um.max(tile.seams.max_seam_um),
+                job.facets.anneal.step_weight
+            ),
+        ),
+        (
             "arrangement energy".into(),
             format!(
                 "{:.2}% of random, {} valleys (random {:.0})",
@@ -65,6 +84,27 @@ pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) 
 }
 
 /// The G-code table: "To mill this" — what a machinist needs first, then the program's numbers.
+/// The tile's relief against its budget, and what kept it there.
+fn relief_line(job: &super::Job, tile: &Tile) -> String {
+    let (lo, hi) = tile.heightfield.range();
+    let relief = hi - lo;
+    let budget = job.facets.max_relief_mm;
+    if budget <= 0.0 {
+        return format!("{relief:.3} mm (no budget)");
+    }
+    let a = &tile.arrangement;
+    let corners = crate::facets::relief::relief_mm(&a.p, &a.q, &tile.z_mm, tile.config.facet_mm);
+    let held = corners >= budget - 1e-6;
+    format!(
+        "{relief:.3} mm of a {budget:.3} mm budget (`facets.max_relief_mm`: the finishing tool's flutes less 10% unless the job sets it); {}",
+        if held {
+            "the budget held it: the heights are the least-squares ones within it, with deliberate steps where facets were held"
+        } else {
+            "the annealed arrangement (step term) and the Poisson heights stayed within it unaided"
+        }
+    )
+}
+
 pub(super) fn program(ready: &Ready, s: &Summary, relief_mm: f64) -> Vec<(String, String)> {
     let job = &ready.job;
     let t = &job.toolpath;
