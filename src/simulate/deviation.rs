@@ -245,7 +245,11 @@ impl Window {
                 open: vec![],
             }
         };
-        win.open = opening(&win.h, win.nx, win.ny, pd, win.periodic, tool);
+        win.open = if win.periodic {
+            crate::morphology::opening_periodic(&win.h, win.nx, win.ny, pd, tool)
+        } else {
+            opening(&win.h, win.nx, win.ny, pd, false, tool)
+        };
         Some(win)
     }
 }
