@@ -346,9 +346,9 @@ fn convergence(rounds: &[crate::design::Round], metrics: &Metrics, tol: &Toleran
         .unwrap_or(1.0);
     let mark = |v: f64| vec![(chosen - 0.15, pct(v)), (chosen + 0.15, pct(v))];
     let plot = LinePlot {
-        title: "design rounds: slope variance off the target's".into(),
+        title: "design rounds: variance off the target (%)".into(),
         x_label: "round".into(),
-        y_label: "% off the target's variance".into(),
+        y_label: "%".into(),
         series: vec![
             Series {
                 label: "model x".into(),
