@@ -38,7 +38,7 @@ impl Default for DesignConfig {
         Self {
             rounds: 4,
             gain: 1.0,
-            stop_fraction: 0.35,
+            stop_fraction: 0.2,
         }
     }
 }
@@ -114,6 +114,11 @@ pub struct DesignInput<'a> {
     pub scallop: &'a Kernel,
     /// The finishing bit.
     pub tool: Shape,
+    /// The finishing raster's stepover, mm, and the angle of its passes from x, degrees: the model's slopes
+    /// are measured as the milled surface's are (the mean over one stepover across the passes).
+    pub stepover_mm: f64,
+    /// See `stepover_mm`.
+    pub raster_angle_deg: f64,
     /// The band the slope variance ratios must fall in, `[low, high]` (the verdict's).
     pub cov_band: [f64; 2],
     /// The smallest NDF correlation (the verdict's).
@@ -190,7 +195,13 @@ fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale
     let domain = n.config.domain();
     let pitch = model::model_pitch_mm(tile, &input.tool);
     let opened = model::as_milled(tile, &input.tool, pitch);
-    let (raw, _) = geometric::ndf(&opened, domain, 0.0, 1);
+    let slopes = geometric::stepover_slopes(
+        &opened,
+        [0, 0, opened.nx, opened.ny],
+        input.raster_angle_deg,
+        input.stepover_mm,
+    );
+    let (raw, _) = geometric::ndf_of_slopes(&slopes, domain);
     let mut milled = input.scallop.convolve(&raw);
     milled.normalise();
     let facet_slopes: Vec<(f64, f64)> = tile

@@ -4,7 +4,8 @@
 //! ([`crate::morphology::opening`]): planes and convex edges survive, concave corners and the foot of every
 //! step between facets are filled with the ball's own sphere. The raster's grooves come on top, and their
 //! slopes are modelled by the scallop lobe (as the verification measures them), so the model's NDF is
-//! `NDF(O) ⊛ K_scallop`. The opening is taken on the tile rasterised at about a 24th of the ball radius,
+//! `NDF(O) ⊛ K_scallop`, its slopes taken as the milled surface's are: the mean over one stepover across the
+//! passes (`optics::geometric::stepover_slopes`), so the model smooths the fillets as the measurement does. The opening is taken on the tile rasterised at about a 24th of the ball radius,
 //! periodic, so a round costs a fraction of a second instead of a simulation of the program.
 
 use crate::facets::{self, Tile};

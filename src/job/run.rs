@@ -222,6 +222,8 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
             base: nd.kernel.as_ref(),
             scallop: &scallop,
             tool: tool_shape,
+            stepover_mm: stepover,
+            raster_angle_deg: job.toolpath.angle_deg,
             cov_band: tol.cov_ratio,
             corr_min: tol.ndf_corr_min,
             l1_max: tol.ndf_l1_max,

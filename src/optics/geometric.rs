@@ -53,6 +53,69 @@ pub fn slopes(hf: &Heightfield, prefilter_um: f64, margin: usize) -> Vec<(f64, f
         .collect()
 }
 
+/// Slopes `(∂z/∂x, ∂z/∂y)` of the cells `[i0, j0, nx, ny]` of `hf`, each the mean slope over one stepover
+/// `s` across raster passes at `angle_deg` from x: across them `(z(c + n s/2) − z(c − n s/2)) / s`, along
+/// them the central difference averaged over the same window (bilinear samples; a periodic grid wraps, a
+/// bounded one is clamped at its edge). A groove of period `s` across the passes is removed exactly and
+/// everything wider kept (`verify::milled` explains why the milled surface is measured so).
+pub fn stepover_slopes(hf: &Heightfield, cells: [usize; 4], angle_deg: f64, stepover_mm: f64) -> Vec<(f64, f64)> {
+    let [i0, j0, wn, hn] = cells;
+    let p = hf.pitch_mm;
+    let (sin, cos) = angle_deg.to_radians().sin_cos();
+    let t = (cos, sin); // along the passes, in cells per cell
+    let n = (-sin, cos); // across
+    let half = 0.5 * stepover_mm / p; // cells
+                                      // the across-window, sampled at K midpoints
+    let k = ((2.0 * half).ceil() as usize).max(2) + 1;
+    let offs: Vec<f64> = (0..k)
+        .map(|m| -half + 2.0 * half * (m as f64 + 0.5) / k as f64)
+        .collect();
+    let (nx, ny, periodic) = (hf.nx, hf.ny, hf.periodic);
+    let z = &hf.z_mm;
+    let at = move |x: f64, y: f64| -> f64 {
+        // bilinear in cell-centre coordinates
+        if periodic {
+            let (fx, fy) = (x.floor(), y.floor());
+            let (i, j) = (
+                (fx as i64).rem_euclid(nx as i64) as usize,
+                (fy as i64).rem_euclid(ny as i64) as usize,
+            );
+            let (i1, j1) = ((i + 1) % nx, (j + 1) % ny);
+            let (tx, ty) = (x - fx, y - fy);
+            let a = z[j * nx + i] * (1.0 - tx) + z[j * nx + i1] * tx;
+            let b = z[j1 * nx + i] * (1.0 - tx) + z[j1 * nx + i1] * tx;
+            return a * (1.0 - ty) + b * ty;
+        }
+        let x = x.clamp(0.0, (nx - 1) as f64);
+        let y = y.clamp(0.0, (ny - 1) as f64);
+        let (i, j) = ((x.floor() as usize).min(nx - 2), (y.floor() as usize).min(ny - 2));
+        let (fx, fy) = (x - i as f64, y - j as f64);
+        let a = z[j * nx + i] * (1.0 - fx) + z[j * nx + i + 1] * fx;
+        let b = z[(j + 1) * nx + i] * (1.0 - fx) + z[(j + 1) * nx + i + 1] * fx;
+        a * (1.0 - fy) + b * fy
+    };
+    (j0..j0 + hn)
+        .into_par_iter()
+        .flat_map_iter(|j| {
+            let offs = &offs;
+            (i0..i0 + wn).map(move |i| {
+                let (x, y) = (i as f64, j as f64);
+                let across =
+                    (at(x + n.0 * half, y + n.1 * half) - at(x - n.0 * half, y - n.1 * half)) / (2.0 * half * p);
+                let along = offs
+                    .iter()
+                    .map(|o| {
+                        let (cx, cy) = (x + n.0 * o, y + n.1 * o);
+                        at(cx + t.0, cy + t.1) - at(cx - t.0, cy - t.1)
+                    })
+                    .sum::<f64>()
+                    / (offs.len() as f64 * 2.0 * p);
+                (t.0 * along + n.0 * across, t.1 * along + n.1 * across)
+            })
+        })
+        .collect()
+}
+
 /// Separable Gaussian blur of the heights with σ in mm (wrapping when periodic, clamping otherwise).
 pub fn gaussian(hf: &Heightfield, sigma_mm: f64) -> Heightfield {
     let s = sigma_mm / hf.pitch_mm;

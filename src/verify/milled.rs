@@ -23,7 +23,7 @@
 //!   job's rms facet slope (tan β ≈ 0.14) that is 6% of the scallop part, under 1% of the total variance.
 
 use crate::heightfield::Heightfield;
-use rayon::prelude::*;
+use crate::optics::geometric;
 use serde::{Deserialize, Serialize};
 
 /// How the milled NDF was measured (`metrics.json` `measurement`).
@@ -102,50 +102,10 @@ pub fn reach_cells(pitch_mm: f64, stepover_mm: f64) -> usize {
 }
 
 /// Slopes `(∂z/∂x, ∂z/∂y)` of the cells of `win`, each the mean slope over one stepover across the passes
-/// (module notes); the passes run at `angle_deg` from x. The window must lie [`reach_cells`] inside the grid.
+/// (module notes; [`geometric::stepover_slopes`]); the passes run at `angle_deg` from x. The window must lie
+/// [`reach_cells`] inside the grid.
 pub fn slopes(hf: &Heightfield, win: &Window, angle_deg: f64, stepover_mm: f64) -> Vec<(f64, f64)> {
-    let p = hf.pitch_mm;
-    let (sin, cos) = angle_deg.to_radians().sin_cos();
-    let t = (cos, sin); // along the passes, in cells per cell
-    let n = (-sin, cos); // across
-    let half = 0.5 * stepover_mm / p; // cells
-                                      // the across-window, sampled at K midpoints
-    let k = ((2.0 * half).ceil() as usize).max(2) + 1;
-    let offs: Vec<f64> = (0..k)
-        .map(|m| -half + 2.0 * half * (m as f64 + 0.5) / k as f64)
-        .collect();
-    let (nx, ny) = (hf.nx, hf.ny);
-    let z = &hf.z_mm;
-    let at = move |x: f64, y: f64| -> f64 {
-        // bilinear in cell-centre coordinates, clamped to the grid
-        let x = x.clamp(0.0, (nx - 1) as f64);
-        let y = y.clamp(0.0, (ny - 1) as f64);
-        let (i, j) = ((x.floor() as usize).min(nx - 2), (y.floor() as usize).min(ny - 2));
-        let (fx, fy) = (x - i as f64, y - j as f64);
-        let a = z[j * nx + i] * (1.0 - fx) + z[j * nx + i + 1] * fx;
-        let b = z[(j + 1) * nx + i] * (1.0 - fx) + z[(j + 1) * nx + i + 1] * fx;
-        a * (1.0 - fy) + b * fy
-    };
-    (win.j0..win.j0 + win.ny)
-        .into_par_iter()
-        .flat_map_iter(|j| {
-            let offs = &offs;
-            (win.i0..win.i0 + win.nx).map(move |i| {
-                let (x, y) = (i as f64, j as f64);
-                let across =
-                    (at(x + n.0 * half, y + n.1 * half) - at(x - n.0 * half, y - n.1 * half)) / (2.0 * half * p);
-                let along = offs
-                    .iter()
-                    .map(|o| {
-                        let (cx, cy) = (x + n.0 * o, y + n.1 * o);
-                        at(cx + t.0, cy + t.1) - at(cx - t.0, cy - t.1)
-                    })
-                    .sum::<f64>()
-                    / (offs.len() as f64 * 2.0 * p);
-                (t.0 * along + n.0 * across, t.1 * along + n.1 * across)
-            })
-        })
-        .collect()
+    geometric::stepover_slopes(hf, [win.i0, win.j0, win.nx, win.ny], angle_deg, stepover_mm)
 }
 
 #[cfg(test)]
