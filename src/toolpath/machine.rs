@@ -149,7 +149,8 @@ pub struct Tool {
     pub number: u32,
     /// Number of flutes (for the chip load `feed / (rpm · flutes)` in the header); default 2.
     pub flutes: u32,
-    /// Cutting data in aluminium.
+    /// Cutting data in aluminium (a profile may spell the key `aluminum`).
+    #[serde(alias = "aluminum")]
     pub aluminium: CuttingData,
     /// Cutting data in machining wax and plastics.
     pub wax: CuttingData,
@@ -169,6 +170,7 @@ struct ToolRecord {
     number: u32,
     #[serde(default = "two")]
     flutes: u32,
+    #[serde(alias = "aluminum")]
     aluminium: CuttingData,
     wax: CuttingData,
 }
@@ -214,7 +216,8 @@ impl From<Tool> for ToolRecord {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Stock {
-    /// Aluminium.
+    /// Aluminium (`"aluminum"`, the US spelling, is read as the same).
+    #[serde(alias = "aluminum")]
     Aluminium,
     /// Machining wax and plastics.
     Wax,
@@ -485,6 +488,21 @@ impl Machine {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_us_spelling_of_aluminium_reads_as_the_same_stock_and_key() {
+        #[derive(Deserialize)]
+        struct S {
+            stock: Stock,
+        }
+        let us: S = toml::from_str("stock = \"aluminum\"").unwrap();
+        let uk: S = toml::from_str("stock = \"aluminium\"").unwrap();
+        assert_eq!(us.stock, uk.stock);
+        let text = include_str!("../../machines/grbl-3018.toml");
+        let uk = Machine::parse(text).unwrap();
+        let us = Machine::parse(&text.replace("aluminium = {", "aluminum = {")).unwrap();
+        assert_eq!(us, uk);
+    }
 
     fn shipped() -> Vec<std::path::PathBuf> {
         let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("machines");
