@@ -259,6 +259,14 @@ impl SlopeGrid {
     /// This density restricted to slopes no steeper than `cone_tan` (`|∇z| ≤ tan θ`), renormalised: the
     /// part a tool whose steepest facet is `θ` can make.
     pub fn within_cone(&self, cone_tan: f64) -> SlopeGrid {
+        let mut out = self.cut_to_cone(cone_tan);
+        out.normalise();
+        out
+    }
+
+    /// This density with every cell steeper than `cone_tan` set to zero, not renormalised (its mass is the
+    /// part within the cone).
+    pub fn cut_to_cone(&self, cone_tan: f64) -> SlopeGrid {
         let d = self.domain;
         let mut out = self.clone();
         for j in 0..d.ny {
@@ -268,7 +276,6 @@ impl SlopeGrid {
                 }
             }
         }
-        out.normalise();
         out
     }
 

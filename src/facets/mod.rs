@@ -318,16 +318,7 @@ fn machinable(ndf: &SlopeGrid, cfg: &FacetsConfig) -> Result<(SlopeGrid, f64), F
     if total.is_nan() || total <= 0.0 {
         return Err(FacetsError::Ndf("the density has no mass".into()));
     }
-    let limit = cfg.max_slope_deg.to_radians().tan();
-    let d = ndf.domain;
-    let mut inside = ndf.clone();
-    for j in 0..d.ny {
-        for i in 0..d.nx {
-            if d.p_at(i).hypot(d.q_at(j)) > limit {
-                inside.density[j * d.nx + i] = 0.0;
-            }
-        }
-    }
+    let mut inside = ndf.cut_to_cone(cfg.max_slope_deg.to_radians().tan());
     let steep = 1.0 - inside.mass() / total;
     match cfg.steep {
         SteepPolicy::Truncate => {

@@ -301,18 +301,7 @@ fn milled_ndf(cfg: &VerifyConfig, input: &VerifyInput) -> Result<(SlopeGrid, f64
     };
     let milled = normalised(lobe.convolve(&raw));
     let cone_tan = input.cone_deg.to_radians().tan();
-    let beyond = 1.0 - {
-        let mut inside = n.observed.clone();
-        let d = inside.domain;
-        for j in 0..d.ny {
-            for i in 0..d.nx {
-                if d.p_at(i).hypot(d.q_at(j)) > cone_tan {
-                    inside.density[j * d.nx + i] = 0.0;
-                }
-            }
-        }
-        inside.mass() / n.observed.mass().max(1e-300)
-    };
+    let beyond = 1.0 - n.observed.cut_to_cone(cone_tan).mass() / n.observed.mass().max(1e-300);
     let measurement = Measurement {
         window: win,
         margin_cells: margin,
