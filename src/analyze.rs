@@ -335,6 +335,7 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
         y_label: "q = dz/dy".into(),
         value_label: "P22 (log10)".into(),
         scale: Scale::Log { decades: 4.0 },
+        value_max: None,
         plot_px: 480,
         rgb: None,
     }
@@ -387,22 +388,30 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
 }
 
 /// The geometric (microfacet) and wave (Kirchhoff, FFT) BRDFs side by side over ψ̄ at incidence `wi`, on
-/// `|ψ̄| ≤ 2·max_slope` (the geometric lobe's extent), log scale.
+/// `|ψ̄| ≤ 2·max_slope` (the geometric lobe's extent) but never beyond the unit disc of real directions
+/// (outside it is grey), log scale, one colour scale for both panels (the larger of their maxima on top).
 pub fn wave_vs_geometric_png(slice: &wave::WaveSlice, geo: &MicrofacetBrdf, wi: &Vec3, max_slope: f64) -> Canvas {
-    let half = ((2.0 * max_slope / slice.dpsi).ceil() as usize).clamp(4, slice.m / 2 - 1);
+    let reach = (2.0 * max_slope).min(1.0);
+    let half = ((reach / slice.dpsi).ceil() as usize).clamp(4, slice.m / 2 - 1);
     let k = 2 * half + 1;
     let c = slice.m / 2;
-    let mut fw = vec![0.0; k * k];
-    let mut fg = vec![0.0; k * k];
+    let mut fw = vec![f64::NAN; k * k];
+    let mut fg = vec![f64::NAN; k * k];
     for b in 0..k {
         for a in 0..k {
             let (sa, sb) = (c + a - half, c + b - half);
-            fw[b * k + a] = slice.f[sb * slice.m + sa];
             if let Some(wo) = slice.wo(sa, sb) {
+                fw[b * k + a] = slice.f[sb * slice.m + sa];
                 fg[b * k + a] = geo.eval(wi, &wo)[0];
             }
         }
     }
+    let top = fw
+        .iter()
+        .chain(&fg)
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(f64::NEG_INFINITY, f64::max);
     let ext = half as f64 * slice.dpsi;
     let map = |v: &[f64], title: &str| {
         Heatmap {
@@ -412,10 +421,11 @@ pub fn wave_vs_geometric_png(slice: &wave::WaveSlice, geo: &MicrofacetBrdf, wi: 
             x_range: (-ext, ext),
             y_range: (-ext, ext),
             title: title.into(),
-            x_label: "psi_x = sin(theta_o) cos(phi_o)".into(),
-            y_label: "psi_y".into(),
-            value_label: "f (1/sr, log10)".into(),
+            x_label: "ψx (sin θo cos φo at normal incidence)".into(),
+            y_label: "ψy".into(),
+            value_label: "f (1/sr)".into(),
             scale: Scale::Log { decades: 4.0 },
+            value_max: top.is_finite().then_some(top),
             plot_px: 420,
             rgb: None,
         }

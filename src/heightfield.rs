@@ -136,6 +136,7 @@ impl Heightfield {
             y_label: "y (mm)".into(),
             value_label: "z (µm)".into(),
             scale: Scale::Linear,
+            value_max: None,
             plot_px: 640,
             rgb: Some(&rgb),
         }

@@ -52,6 +52,9 @@ pub struct Canvas {
     pub height: u32,
     /// Row-major RGB pixels, top row first.
     pub pixels: Vec<[u8; 3]>,
+    /// Labels that could not be drawn as given: a character with no glyph (drawn as `?`) or text wider than
+    /// the canvas (cut at its edges). Kept so that a report can say so and a test can fail on it.
+    pub label_defects: Vec<String>,
 }
 
 impl OriginDimensions for Canvas {
@@ -86,6 +89,7 @@ impl Canvas {
             width,
             height,
             pixels: vec![[255, 255, 255]; (width * height) as usize],
+            label_defects: vec![],
         }
     }
 
@@ -99,20 +103,33 @@ impl Canvas {
 
     /// Draw text with its anchor at `(x, y)` (baseline), aligned left, centre or right. Latin-1 characters
     /// come from the ISO 8859-1 bitmap font, Greek letters from its ISO 8859-7 sibling (the same 6×10 cell),
-    /// and the few mathematical signs neither has are spelt in ASCII ([`glyph_text`]).
+    /// and the few mathematical signs neither has are spelt in ASCII ([`glyph_text`]). Text that would run
+    /// past the left or right edge is moved inside; text wider than the canvas, or with a character neither
+    /// font has, is drawn as well as it can be and recorded in [`Canvas::label_defects`].
     pub fn text(&mut self, x: i32, y: i32, s: &str, align: Alignment) {
-        let s = glyph_text(s);
-        let n = s.chars().count() as i32;
+        let drawn = glyph_text(s);
+        let missing = drawn.matches('?').count() > s.matches('?').count();
+        let n = drawn.chars().count() as i32;
         let w = FONT_6X10.character_size.width as i32;
+        let width = n * w;
         let left = match align {
             Alignment::Left => x,
-            Alignment::Center => x - n * w / 2,
-            Alignment::Right => x - n * w,
+            Alignment::Center => x - width / 2,
+            Alignment::Right => x - width,
         };
+        let left = left.min(self.width as i32 - width).max(0);
+        if missing {
+            self.label_defects.push(format!("missing glyph in {s:?}"));
+        }
+        let top = y - FONT_6X10.baseline as i32;
+        let h = FONT_6X10.character_size.height as i32;
+        if left + width > self.width as i32 || top < 0 || top + h > self.height as i32 {
+            self.label_defects.push(format!("clipped label {s:?}"));
+        }
         let latin = MonoTextStyle::new(&FONT_6X10, BLACK);
         let greek = MonoTextStyle::new(&GREEK_6X10, BLACK);
         let mut buf = [0u8; 4];
-        for (k, c) in s.chars().enumerate() {
+        for (k, c) in drawn.chars().enumerate() {
             let style = if is_greek(c) { greek } else { latin };
             let p = Point::new(left + k as i32 * w, y);
             Text::with_alignment(c.encode_utf8(&mut buf), p, style, Alignment::Left)
@@ -139,6 +156,7 @@ impl Canvas {
 
     /// Copy another canvas in with its top-left corner at `(x, y)`.
     pub fn blit(&mut self, other: &Canvas, x: i64, y: i64) {
+        self.label_defects.extend(other.label_defects.iter().cloned());
         for j in 0..other.height as i64 {
             for i in 0..other.width as i64 {
                 self.put(x + i, y + j, other.pixels[(j * other.width as i64 + i) as usize]);
@@ -214,6 +232,9 @@ pub struct Heatmap<'a> {
     pub value_label: String,
     /// Colour scale.
     pub scale: Scale,
+    /// Top of the colour scale (default: the largest finite value). Panels compared side by side pass the
+    /// same value so that one colour means one value in all of them.
+    pub value_max: Option<f64>,
     /// Side of the square plot area in pixels (the longer side when the extents are not square).
     pub plot_px: u32,
     /// Pixel colours to show instead of the colour-mapped values (e.g. a shaded relief tinted by height);
@@ -279,7 +300,9 @@ impl Heatmap<'_> {
         let (left, top, right, bottom) = (70, 28, 110, 44);
         let mut cv = Canvas::new((left + pw + right) as u32, (top + ph + bottom) as u32);
         let finite: Vec<f64> = self.values.iter().copied().filter(|v| v.is_finite()).collect();
-        let vmax = finite.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let vmax = self
+            .value_max
+            .unwrap_or_else(|| finite.iter().copied().fold(f64::NEG_INFINITY, f64::max));
         let vmin = finite.iter().copied().fold(f64::INFINITY, f64::min);
         let (lo, hi, map): (f64, f64, Box<dyn Fn(f64) -> f64>) = match self.scale {
             Scale::Linear => {
@@ -288,7 +311,7 @@ impl Heatmap<'_> {
                 } else {
                     (vmin - 1.0, vmin + 1.0)
                 };
-                (lo, hi, Box::new(move |v| (v - lo) / (hi - lo)))
+                (lo, hi, Box::new(move |v: f64| (v.min(hi) - lo) / (hi - lo)))
             }
             Scale::Log { decades } => {
                 let hi = if vmax > 0.0 { vmax.log10() } else { 0.0 };
@@ -379,6 +402,93 @@ mod tests {
         }
     }
 
+    /// Dark pixels on the outermost rows and columns: text or lines cut by the canvas' edge.
+    fn dark_border_pixels(cv: &Canvas) -> usize {
+        let (w, h) = (cv.width as usize, cv.height as usize);
+        let dark = |x: usize, y: usize| cv.pixels[y * w + x].iter().map(|&c| c as u32).sum::<u32>() < 600;
+        (0..w).filter(|&x| dark(x, 0) || dark(x, h - 1)).count()
+            + (0..h).filter(|&y| dark(0, y) || dark(w - 1, y)).count()
+    }
+
+    #[test]
+    fn labels_stay_inside_the_canvas_or_are_recorded() {
+        // a colour-bar label longer than the right margin is moved inside, not cut
+        let v: Vec<f64> = (0..64).map(f64::from).collect();
+        let h = Heatmap {
+            values: &v,
+            nx: 8,
+            ny: 8,
+            x_range: (0.0, 1.0),
+            y_range: (0.0, 1.0),
+            title: "t".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            value_label: "simulated − design height (µm)".into(),
+            scale: Scale::Linear,
+            value_max: None,
+            plot_px: 100,
+            rgb: None,
+        };
+        let cv = h.render();
+        assert!(cv.label_defects.is_empty(), "{:?}", cv.label_defects);
+        assert_eq!(dark_border_pixels(&cv), 0);
+        // text wider than the canvas, and a sign neither font has, are recorded
+        let mut small = Canvas::new(40, 20);
+        small.text(0, 12, "far too long for forty pixels", Alignment::Left);
+        small.text(0, 12, "∂z", Alignment::Left);
+        small.text(0, 2, "up", Alignment::Left);
+        assert_eq!(small.label_defects.len(), 3, "{:?}", small.label_defects);
+        assert!(small.label_defects[1].contains("missing glyph"));
+        // and survive being placed in a larger figure
+        let row = Canvas::hstack(&[small.clone(), cv]);
+        assert_eq!(row.label_defects, small.label_defects);
+        // a literal '?' is not a missing glyph
+        let mut q = Canvas::new(100, 20);
+        q.text(0, 12, "why?", Alignment::Left);
+        assert!(q.label_defects.is_empty());
+    }
+
+    #[test]
+    fn legends_sit_below_the_plot_and_dashes_alternate() {
+        let series = |label: &str, y: f64, dashed| Series {
+            label: label.into(),
+            points: vec![(0.0, y), (1.0, y)],
+            color: [0, 0, 0],
+            dashed,
+        };
+        let plot = LinePlot {
+            title: "t".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            series: vec![series("a long legend entry", 1.0, false), series("b", -1.0, true)],
+            size_px: (200, 100),
+            log_y: false,
+        };
+        let cv = plot.render();
+        assert!(cv.label_defects.is_empty(), "{:?}", cv.label_defects);
+        // the plot area (x 70..270, y 28..128) holds only the curves: the legend is below y 128 + 44
+        let ink = |y0: usize, y1: usize| {
+            (y0..y1)
+                .flat_map(|y| (71..269).map(move |x| (x, y)))
+                .filter(|&(x, y)| cv.pixels[y * cv.width as usize + x] != [255, 255, 255])
+                .count()
+        };
+        assert!(ink(172, cv.height as usize) > 0, "no legend below the axis");
+        // y = 1 and y = -1 with a 5% margin each side: neither line lies on the frame (rows 27 and 129)
+        let row = |y: usize| {
+            (71..269)
+                .filter(|&x| cv.pixels[y * cv.width as usize + x] == [0, 0, 0])
+                .count()
+        };
+        assert!(row(30) + row(31) + row(32) > 150, "upper line");
+        // the dashed line at the bottom: ink over 6 of every 10 pixels
+        let dashed: Vec<bool> = (71..269)
+            .map(|x| (123..127).any(|y| cv.pixels[y * cv.width as usize + x] == [0, 0, 0]))
+            .collect();
+        let on = dashed.iter().filter(|&&d| d).count() as f64 / dashed.len() as f64;
+        assert!((0.5..0.7).contains(&on), "dashed line inks {on} of its length");
+    }
+
     #[test]
     fn ticks_are_nice_and_inside() {
         let t = nice_ticks(-1.732, 1.732, 6);
@@ -401,6 +511,7 @@ mod tests {
             y_label: "y".into(),
             value_label: "v".into(),
             scale: Scale::Log { decades: 4.0 },
+            value_max: None,
             plot_px: 100,
             rgb: None,
         };
@@ -463,7 +574,11 @@ impl LinePlot {
     /// Render to a canvas.
     pub fn render(&self) -> Canvas {
         let (pw, ph) = (self.size_px.0 as i32, self.size_px.1 as i32);
-        let (left, top, right, bottom) = (70, 28, 20, 44);
+        let (left, top, right) = (70, 28, 20);
+        // The legend sits below the x axis label, never over the curves: entries laid out in rows.
+        let legend = legend_layout(&self.series, pw + right - 4);
+        let legend_rows = legend.iter().map(|e| e.1 + 1).max().unwrap_or(0);
+        let bottom = 44 + 14 * legend_rows + if legend_rows > 0 { 6 } else { 0 };
         let mut cv = Canvas::new((left + pw + right) as u32, (top + ph + bottom) as u32);
         let ty = |y: f64| {
             if self.log_y {
@@ -499,6 +614,10 @@ impl LinePlot {
         }
         let margin = 0.05 * (y1 - y0);
         y1 += margin;
+        if self.log_y || y0 < 0.0 {
+            // nothing drawn on the frame: curves and reference lines at the low end stay visible
+            y0 -= margin;
+        }
         let px = |x: f64| left + ((x - x0) / (x1 - x0) * pw as f64).round() as i32;
         let py = |y: f64| top + ph - ((y - y0) / (y1 - y0) * ph as f64).round() as i32;
         cv.frame(left - 1, top - 1, (pw + 2) as u32, (ph + 2) as u32);
@@ -520,10 +639,9 @@ impl LinePlot {
         cv.text(left + pw / 2, top + ph + 30, &self.x_label, Alignment::Center);
         cv.text(4, top - 8, &self.y_label, Alignment::Left);
         cv.text(left + pw / 2, 14, &self.title, Alignment::Center);
-        let mut entry = 0;
         for s in &self.series {
             let mut prev: Option<(i32, i32)> = None;
-            let mut step = 0usize;
+            let mut phase = 0.0;
             for p in &s.points {
                 let y = ty(p.1);
                 if !y.is_finite() {
@@ -532,23 +650,70 @@ impl LinePlot {
                 }
                 let cur = (px(p.0), py(y.clamp(y0, y1)));
                 if let Some(a) = prev {
-                    step += 1;
-                    if !s.dashed || step % 4 < 2 {
-                        draw_line_color(&mut cv, a, cur, s.color);
-                    }
+                    phase = draw_series_line(&mut cv, a, cur, s.color, s.dashed, phase);
                 }
                 prev = Some(cur);
             }
-            // legend (a series without a label continues the one before it)
-            if !s.label.is_empty() {
-                let ly = top + 12 + 14 * entry;
-                draw_line_color(&mut cv, (left + pw - 150, ly - 3), (left + pw - 130, ly - 3), s.color);
-                cv.text(left + pw - 125, ly, &s.label, Alignment::Left);
-                entry += 1;
-            }
+        }
+        for (s, row, x) in legend {
+            let ly = top + ph + 48 + 14 * row;
+            let x = 4 + x;
+            draw_series_line(&mut cv, (x, ly - 3), (x + 20, ly - 3), s.color, s.dashed, 0.0);
+            cv.text(x + 25, ly, &s.label, Alignment::Left);
         }
         cv
     }
+}
+
+/// Where each labelled series' legend entry goes: `(series, row, x offset in pixels)`, entries left to right
+/// in rows no wider than `width` (a series without a label continues the one before it and has no entry).
+fn legend_layout(series: &[Series], width: i32) -> Vec<(&Series, i32, i32)> {
+    let cell = FONT_6X10.character_size.width as i32;
+    let (mut row, mut x) = (0, 0);
+    let mut out = vec![];
+    for s in series.iter().filter(|s| !s.label.is_empty()) {
+        let w = 25 + cell * glyph_text(&s.label).chars().count() as i32 + 16;
+        if x > 0 && x + w > width {
+            row += 1;
+            x = 0;
+        }
+        out.push((s, row, x));
+        x += w;
+    }
+    out
+}
+
+/// Dashes of a dashed series, pixels on and off.
+const DASH_PX: (f64, f64) = (6.0, 4.0);
+
+/// A segment of a series, solid or dashed; dashes continue across segments from `phase` (pixels into the
+/// dash pattern), and the phase at the segment's end is returned.
+fn draw_series_line(cv: &mut Canvas, a: (i32, i32), b: (i32, i32), c: [u8; 3], dashed: bool, phase: f64) -> f64 {
+    if !dashed {
+        draw_line_color(cv, a, b, c);
+        return 0.0;
+    }
+    let (dx, dy) = ((b.0 - a.0) as f64, (b.1 - a.1) as f64);
+    let len = dx.hypot(dy);
+    let period = DASH_PX.0 + DASH_PX.1;
+    let at = |t: f64| {
+        let f = if len > 0.0 { t / len } else { 0.0 };
+        (
+            (a.0 as f64 + f * dx).round() as i32,
+            (a.1 as f64 + f * dy).round() as i32,
+        )
+    };
+    // walk the pattern: dash starts at multiples of the period, shifted by the phase
+    let mut t = -(phase % period);
+    while t < len {
+        // a line's end pixels are both inked: a dash of n pixels runs from its first to its n-th
+        let (on0, on1) = (t.max(0.0), (t + DASH_PX.0 - 1.0).min(len));
+        if on1 >= on0 {
+            draw_line_color(cv, at(on0), at(on1), c);
+        }
+        t += period;
+    }
+    (phase + len) % period
 }
 
 fn draw_line_color(cv: &mut Canvas, a: (i32, i32), b: (i32, i32), c: [u8; 3]) {

@@ -165,3 +165,39 @@ fn refusals_write_nothing() {
         assert!(!nc.exists(), "{all:?} wrote a program");
     }
 }
+
+/// Issue 15: shipped profiles are found by name from any folder, and the program is the one the file on
+/// disk gives; an unknown name lists the shipped ones.
+#[test]
+fn a_shipped_profile_is_found_by_name() {
+    let dir = tempfile::tempdir().unwrap();
+    let tile = small_tile(dir.path());
+    let run = |m: &str, out: &Path| {
+        Command::new(env!("CARGO_BIN_EXE_brdfmill"))
+            .current_dir(dir.path())
+            .args([
+                "toolpath",
+                "--tile",
+                tile.to_str().unwrap(),
+                "--machine",
+                m,
+                "--tool",
+                "ball1",
+            ])
+            .args(["--area", "4x4", "--stock", "wax", "--out", out.to_str().unwrap()])
+            .output()
+            .unwrap()
+    };
+    let (by_name, by_path) = (dir.path().join("a.nc"), dir.path().join("b.nc"));
+    let o = run("grbl-3018", &by_name);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(run(&machine("grbl-3018.toml"), &by_path).status.success());
+    assert_eq!(std::fs::read(&by_name).unwrap(), std::fs::read(&by_path).unwrap());
+    let bad = run("grbl-9999", &dir.path().join("c.nc"));
+    let e = String::from_utf8_lossy(&bad.stderr);
+    assert!(
+        !bad.status.success() && e.contains("grbl-router-6040") && e.contains("linuxcnc-mill"),
+        "{e}"
+    );
+    assert!(!dir.path().join("c.nc").exists());
+}

@@ -332,16 +332,10 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
     assert!(!html.contains("http://") && !html.contains("https://") && !html.contains("<script"));
 }
 
-/// The report rendered by a real browser: its images show.
-#[test]
-#[ignore = "needs chromium"]
-fn default_job_report_renders_in_chromium() {
-    let chrome = chromium();
-    let out = tempfile::tempdir().unwrap();
-    run_default_job(out.path());
-    let shot = out.path().join("shot.png");
+/// Chromium's headless run on the report with `mode` (`--screenshot=PATH` or `--dump-dom`).
+fn chromium_on(report: &Path, mode: &str) -> std::process::Output {
     let profile = tempfile::tempdir().unwrap();
-    let r = Command::new(chrome)
+    Command::new(chromium())
         .args([
             "--headless",
             "--no-sandbox",
@@ -355,10 +349,38 @@ fn default_job_report_renders_in_chromium() {
             "--window-size=1280,3000",
         ])
         .arg(format!("--user-data-dir={}", profile.path().display()))
-        .arg(format!("--screenshot={}", shot.display()))
-        .arg(format!("file://{}", out.path().join("report.html").display()))
+        .arg(mode)
+        .arg(format!("file://{}", report.display()))
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+/// Dark pixels on a PNG's outermost rows and columns: a label or line cut by the figure's edge (every figure
+/// keeps a white margin round its text).
+fn dark_border_pixels(png_bytes: &[u8]) -> usize {
+    let mut reader = png::Decoder::new(std::io::Cursor::new(png_bytes)).read_info().unwrap();
+    let mut buf = vec![0; reader.output_buffer_size()];
+    let info = reader.next_frame(&mut buf).unwrap();
+    let (w, h, ch) = (info.width as usize, info.height as usize, info.color_type.samples());
+    let dark = |x: usize, y: usize| {
+        let p = &buf[(y * w + x) * ch..(y * w + x) * ch + 3];
+        p.iter().map(|&c| c as u32).sum::<u32>() < 600
+    };
+    (0..w).filter(|&x| dark(x, 0) || dark(x, h - 1)).count() + (0..h).filter(|&y| dark(0, y) || dark(w - 1, y)).count()
+}
+
+/// The report rendered by a real browser: its images show, the page Chromium built carries no figure
+/// defect (a label with a character the figures' fonts lack, drawn as `?`, or one too wide for its figure),
+/// and no figure has ink on its outer edge (a label cut off).
+#[test]
+#[ignore = "needs chromium"]
+fn default_job_report_renders_in_chromium() {
+    use base64::Engine;
+    let out = tempfile::tempdir().unwrap();
+    run_default_job(out.path());
+    let report = out.path().join("report.html");
+    let shot = out.path().join("shot.png");
+    let r = chromium_on(&report, &format!("--screenshot={}", shot.display()));
     assert!(shot.exists(), "no screenshot: {}", String::from_utf8_lossy(&r.stderr));
     let n = image_pixels(&std::fs::read(&shot).unwrap());
     println!("{n} image pixels in the screenshot");
@@ -366,6 +388,28 @@ fn default_job_report_renders_in_chromium() {
         n > 5_000,
         "the rendered page shows only {n} image pixels: images did not render"
     );
+    let dom = chromium_on(&report, "--dump-dom");
+    let dom = String::from_utf8_lossy(&dom.stdout);
+    assert!(
+        dom.contains("<figure>"),
+        "Chromium built no page: {}",
+        &dom[..dom.len().min(300)]
+    );
+    let defects: Vec<&str> = dom.lines().filter(|l| l.contains("label-defect")).collect();
+    assert!(defects.is_empty(), "figure defects in the report: {defects:?}");
+    let html = std::fs::read_to_string(&report).unwrap();
+    let b64 = base64::engine::general_purpose::STANDARD;
+    let mut figures = 0;
+    for chunk in html.split("src=\"data:image/png;base64,").skip(1) {
+        let png = b64.decode(&chunk[..chunk.find('"').unwrap()]).unwrap();
+        assert_eq!(
+            dark_border_pixels(&png),
+            0,
+            "figure {figures} has ink on its edge: a label is cut off"
+        );
+        figures += 1;
+    }
+    assert!(figures >= 7, "{figures} figures");
 }
 
 fn write_job(dir: &Path, text: &str) -> PathBuf {
@@ -459,4 +503,44 @@ fn every_example_job_loads() {
         n += 1;
     }
     assert!(n >= 5, "{n} example jobs");
+}
+
+/// Issue 15: a target wider than the NDF grid says so. Beckmann slopes are Gaussian with variance α²/2 per
+/// axis, so the default grid |p|, |q| ≤ tan 60° holds erf(√3/α)² of the mass: for α = 5, 14.1%, and the run
+/// warns that 85.9% lies beyond it; for α = 0.2 the grid holds all of it and nothing is said.
+#[test]
+fn a_target_wider_than_the_ndf_grid_is_reported_with_its_escaped_mass() {
+    let dir = tempfile::tempdir().unwrap();
+    for (alpha, warned) in [("5", Some("85.9%")), ("0.2", None)] {
+        let job = write_job(
+            dir.path(),
+            &job_text("", "", &root().join("machines/grbl-3018.toml").display().to_string())
+                .replace("alpha=0.2", &format!("alpha={alpha}")),
+        );
+        let out = dir.path().join(format!("out-{alpha}"));
+        let o = brdfmill(&[
+            "run",
+            job.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--until",
+            "ndf",
+        ]);
+        let stdout = String::from_utf8_lossy(&o.stdout);
+        assert!(o.status.success(), "{stdout}\n{}", String::from_utf8_lossy(&o.stderr));
+        let line = stdout
+            .lines()
+            .find(|l| l.starts_with("warning") && l.contains("beyond the NDF grid"));
+        match warned {
+            Some(share) => assert!(line.is_some_and(|l| l.contains(share)), "α {alpha}: {stdout}"),
+            None => assert!(line.is_none(), "α {alpha}: {stdout}"),
+        }
+        let ndf = json(&out.join("ndf.json"));
+        let m = f(&ndf["mass_beyond_grid"]);
+        let exact = 1.0 - libm::erf(3f64.sqrt() / alpha.parse::<f64>().unwrap()).powi(2);
+        assert!(
+            (m - exact).abs() < 1e-3,
+            "α {alpha}: ndf.json says {m}, the closed form {exact}"
+        );
+    }
 }

@@ -157,6 +157,19 @@ impl Brdf {
         }
     }
 
+    /// The NDF `D(wm)` (normalised so that `∫ D cosθm dω = 1` for the analytic models) where it is known
+    /// without reading the reflectance: the analytic models' own (Ward's half-vector exponent is Beckmann's)
+    /// and the measured NDF of [`Brdf::measured_ndf`]; `None` for reflectance-only data (MERL).
+    pub fn known_ndf(&self, wm: &Vec3) -> Option<f64> {
+        match &self.model {
+            Model::Microfacet(m) => Some(m.d(wm)),
+            Model::BlinnPhong(b) => Some(b.d(wm)),
+            Model::Ward(w) => Microfacet::new(Family::Beckmann, w.alpha_x, w.alpha_y).map(|m| m.d(wm)),
+            Model::Merl(_) => None,
+            Model::Rgl(_) | Model::Tabulated(_) => self.measured_ndf(wm),
+        }
+    }
+
     /// True when [`Brdf::measured_ndf`] answers.
     pub fn has_measured_ndf(&self) -> bool {
         matches!(self.model, Model::Rgl(_) | Model::Tabulated(_))

@@ -88,6 +88,9 @@ pub fn run(a: &Args) -> Result<()> {
         "tilt      removed p {:.3e}, q {:.3e} ({:.4}°)",
         n.tilt.p, n.tilt.q, n.tilt.deg
     );
+    if let Some(w) = ndf::grid_warning(&n) {
+        println!("warning   {w}");
+    }
     let d = &n.deconvolution;
     println!(
         "deconv    {} — {} of {} iterations, stopped by {:?}, last change {:.2e}",

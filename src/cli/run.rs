@@ -94,6 +94,9 @@ fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outc
     for (stage, s) in &outcome.timings {
         println!("{:>9}  {:6.2} s", stage.name(), s);
     }
+    for w in &outcome.warnings {
+        println!("warning   {w}");
+    }
     let (rounds, chosen) = &outcome.rounds;
     if let Some(c) = rounds.get(*chosen) {
         println!(

@@ -33,7 +33,7 @@ pub struct Args {
     /// Largest stock grid, cells (8 bytes each)
     #[arg(long, default_value_t = 250_000_000)]
     pub max_cells: usize,
-    /// Machine profile whose limits the time estimate uses; default: machines/linuxcnc-mill.toml's
+    /// Machine profile (a path or a shipped name such as grbl-3018) whose limits the time estimate uses; default: machines/linuxcnc-mill.toml's
     #[arg(long)]
     pub machine: Option<PathBuf>,
     /// The design (tile.json from `brdfmill facets`, tile.npy beside it), repeated from the work origin:
@@ -67,7 +67,7 @@ fn parse_bounds(s: &str) -> Result<[f64; 4]> {
 /// Build the configuration from the arguments.
 pub fn config(a: &Args) -> Result<SimulateConfig> {
     let machine = match &a.machine {
-        Some(p) => Some(Machine::load(p)?),
+        Some(p) => Some(Machine::find(&p.to_string_lossy(), std::path::Path::new(""))?.1),
         None => None,
     };
     Ok(SimulateConfig {
@@ -119,7 +119,8 @@ pub fn run(a: &Args) -> Result<()> {
         .relief_png(&format!("simulated cut, {} at {} um", cfg.tool, cfg.pitch_um), 1024)
         .to_png();
     let dev_png = dev.as_ref().map(|d| {
-        d.to_png("simulated - design (um); grey: unreachable or edge band", 1024)
+        d.to_png("simulated - design (µm); grey: unreachable or edge band", 1024)
+            .0
             .to_png()
     });
     let stl = a.stl.then(|| {

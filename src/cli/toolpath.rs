@@ -11,7 +11,7 @@ pub struct Args {
     /// The tile to cut (tile.json from `brdfmill facets`; its tile.npy beside it)
     #[arg(long)]
     pub tile: PathBuf,
-    /// Machine profile (machines/NAME.toml)
+    /// Machine profile: a path, or a shipped profile's name (grbl-3018, grbl-router-6040, linuxcnc-mill)
     #[arg(long)]
     pub machine: PathBuf,
     /// Finishing tool id from the profile (a ball-nose)
@@ -81,7 +81,7 @@ pub fn config(a: &Args) -> Result<ToolpathConfig> {
 /// Run the subcommand.
 pub fn run(a: &Args) -> Result<()> {
     let cfg = config(a)?;
-    let machine = Machine::load(&a.machine)?;
+    let (_, machine) = Machine::find(&a.machine.to_string_lossy(), std::path::Path::new(""))?;
     let tile = TileFile::read(&a.tile)?;
     let hf = tile.load_heightfield(&a.tile)?;
     let t0 = std::time::Instant::now();

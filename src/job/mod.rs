@@ -309,31 +309,10 @@ pub fn tool_slope_cap(
     }
 }
 
-/// The machine profiles shipped in `machines/`, by name.
-pub const SHIPPED_PROFILES: [(&str, &str); 3] = [
-    ("grbl-3018", include_str!("../../machines/grbl-3018.toml")),
-    ("grbl-router-6040", include_str!("../../machines/grbl-router-6040.toml")),
-    ("linuxcnc-mill", include_str!("../../machines/linuxcnc-mill.toml")),
-];
-
-/// A machine profile by path (relative to the job's folder) or, when no such file exists, by the name of a
-/// shipped profile (`grbl-3018`, `grbl-router-6040`, `linuxcnc-mill`).
+/// A machine profile by path (relative to the job's folder) or by a shipped profile's name
+/// ([`Machine::find`]).
 fn load_profile(profile: &str, dir: &Path) -> Result<(PathBuf, Machine), String> {
-    let path = dir.join(profile);
-    if path.exists() {
-        return Machine::load(&path).map(|m| (path, m)).map_err(|e| e.to_string());
-    }
-    let name = profile.trim_end_matches(".toml");
-    match SHIPPED_PROFILES.iter().find(|(n, _)| *n == name) {
-        Some((n, text)) => Machine::parse(text)
-            .map(|m| (PathBuf::from(format!("machines/{n}.toml (shipped)")), m))
-            .map_err(|e| e.to_string()),
-        None => Err(format!(
-            "{}: no such file, and not a shipped profile ({})",
-            path.display(),
-            SHIPPED_PROFILES.map(|(n, _)| n).join(", ")
-        )),
-    }
+    Machine::find(profile, dir).map_err(|e| e.to_string())
 }
 
 /// Set `section.key=value` (dotted path, TOML value) in a parsed job.

@@ -88,6 +88,9 @@ pub struct Outcome {
     pub rounds: (Vec<Round>, usize),
     /// The steepest facet, degrees, and where it came from.
     pub slope_cap: (f64, String),
+    /// What the run noticed about its input that the user should know (e.g. target mass beyond the NDF
+    /// grid), whatever the verdict.
+    pub warnings: Vec<String>,
 }
 
 /// `run.json`: the state of the run in its folder (see [`RUN_STATE`]).
@@ -198,10 +201,12 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
         report: None,
         rounds: (vec![], 0),
         slope_cap: (job.facets.max_slope_deg, ready.slope_cap_from.clone()),
+        warnings: vec![],
     };
     write_state(&mut o, &job.name, &timings, "running")?;
     step(&mut *progress, Stage::Ndf, &mut timings, true);
     let nd = ndf_stage(ready, r, stepover, &mut o)?;
+    outcome.warnings.extend(crate::ndf::grid_warning(&nd.ndf));
     step(&mut *progress, Stage::Ndf, &mut timings, false);
     write_state(&mut o, &job.name, &timings, "running")?;
     if until == Stage::Ndf {
@@ -306,7 +311,7 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
         metrics: &v.metrics,
         figures,
         parameters: super::summary::parameters(ready, &nd.ndf, &tile, &sim),
-        program: super::summary::program(ready, &program.summary, outcome.relief_mm.unwrap_or(0.0)),
+        program: super::summary::program(ready, &program.summary, outcome.relief_mm.unwrap_or(0.0), &dev),
         artifacts: listed(&o.written),
     }
     .to_html();
@@ -361,8 +366,8 @@ fn scallop_lobe(ready: &Ready, nd: &NdfStage, r: f64, stepover: f64) -> Result<K
 }
 
 /// The design loop's tile → `tile.json`, `tile.npy`, `tile.png`, `tile.stl`. Returns the tile and its relief
-/// PNG.
-fn facets_stage(n: &Ndf, tile: Tile, o: &mut Out) -> Result<(Tile, Vec<u8>), JobError> {
+/// PNG with the figure's label defects.
+fn facets_stage(n: &Ndf, tile: Tile, o: &mut Out) -> Result<(Tile, Png), JobError> {
     let tile_file = TileFile::new(
         &tile,
         facets::format::Source {
@@ -372,11 +377,12 @@ fn facets_stage(n: &Ndf, tile: Tile, o: &mut Out) -> Result<(Tile, Vec<u8>), Job
         },
         "tile.npy",
     );
-    let tile_png = tile.relief_png().to_png();
+    let tile_canvas = tile.relief_png();
+    let tile_png = (tile_canvas.to_png(), tile_canvas.label_defects);
     o.write("tile.json", tile_file.to_json().as_bytes())?;
     tile.heightfield.write_npy(&o.dir.join("tile.npy"))?;
     o.written.push(o.dir.join("tile.npy"));
-    o.write("tile.png", &tile_png)?;
+    o.write("tile.png", &tile_png.0)?;
     o.write("tile.stl", &tile.stl())?;
     Ok((tile, tile_png))
 }
@@ -389,7 +395,7 @@ fn simulate_stage(
     gcode: &str,
     design: &crate::heightfield::Heightfield,
     o: &mut Out,
-) -> Result<(Simulation, Deviation, Vec<u8>, Vec<u8>), JobError> {
+) -> Result<(Simulation, Deviation, Png, DeviationPng), JobError> {
     let job = &ready.job;
     let scfg = SimulateConfig {
         tool: shape,
@@ -404,10 +410,12 @@ fn simulate_stage(
     let dev = simulate::deviation(&sim, design, &shape);
     sim.heightfield.write_npy(&o.dir.join("sim.npy"))?;
     o.written.push(o.dir.join("sim.npy"));
-    let sim_png = sim.heightfield.relief_png("simulated milled surface", 1024).to_png();
-    o.write("sim.png", &sim_png)?;
-    let dev_png = dev.to_png("simulated - design", 1024).to_png();
-    o.write("deviation.png", &dev_png)?;
+    let sim_canvas = sim.heightfield.relief_png("simulated milled surface", 1024);
+    let sim_png = (sim_canvas.to_png(), sim_canvas.label_defects);
+    o.write("sim.png", &sim_png.0)?;
+    let (dev_canvas, dev_range_um) = dev.to_png("simulated - design (µm)", 1024);
+    let dev_png = (dev_canvas.to_png(), dev_canvas.label_defects, dev_range_um);
+    o.write("deviation.png", &dev_png.0)?;
     o.write(
         "sim.json",
         SimFile::new(&sim, &scfg, "program.nc", Some(&dev), Some("tile.npy".into()))
@@ -422,11 +430,12 @@ fn surface_figures(
     ready: &Ready,
     diameter_mm: &f64,
     dev: &Deviation,
-    tile_png: Vec<u8>,
-    sim_png: Vec<u8>,
-    dev_png: Vec<u8>,
+    tile_png: Png,
+    sim_png: Png,
+    dev_png: DeviationPng,
 ) -> Vec<report::Figure> {
     let job = &ready.job;
+    let [lo, hi] = dev_png.2;
     vec![
         report::Figure {
             title: "Design tile".into(),
@@ -434,26 +443,37 @@ fn surface_figures(
                 "The periodic facet heightfield ({}×{} facets of {} mm), shaded relief tinted by height.",
                 job.facets.facets_x, job.facets.facets_y, job.facets.facet_mm
             ),
-            png: tile_png,
+            png: tile_png.0,
+            label_defects: tile_png.1,
         },
         report::Figure {
             title: "Simulated milled surface".into(),
             caption: format!("The stock after the program, simulated at {} µm.", job.simulate.pitch_um),
-            png: sim_png,
+            png: sim_png.0,
+            label_defects: sim_png.1,
         },
         report::Figure {
             title: "Deviation from the design".into(),
             caption: format!(
-                "Simulated minus design height. Largest material left {:.2} µm, largest gouge {:.2} µm; {:.2}% of the interior is unreachable for a {} mm ball.",
-                dev.max_over_um,
-                dev.max_under_um,
+                "Simulated minus design height where the {diameter_mm} mm ball can reach the design; grey where it cannot ({:.2}% of the interior: concave corners narrower than the bit) and in the edge band. \
+                 The colours span {lo:.2} to {hi:.2} µm (the 0.1 and 99.9 percentiles of the cells shown; cells beyond take the end colours). \
+                 Largest material left where reachable {:.2} µm, anywhere {:.2} µm (in the unreachable corners); deepest cut below the design (gouge) {:.2} µm.",
                 dev.unreachable_fraction * 100.0,
-                diameter_mm
+                dev.max_over_reachable_um,
+                dev.max_over_um,
+                dev.max_under_um.max(0.0),
             ),
-            png: dev_png,
+            png: dev_png.0,
+            label_defects: dev_png.1,
         },
     ]
 }
+
+/// An encoded figure and the labels it could not draw as given.
+type Png = (Vec<u8>, Vec<String>);
+
+/// The deviation figure as [`Png`] with its colour scale's range, µm.
+type DeviationPng = (Vec<u8>, Vec<String>, [f64; 2]);
 
 /// The artifact table of the report.
 fn listed(written: &[PathBuf]) -> Vec<(String, String)> {

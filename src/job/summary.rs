@@ -3,7 +3,7 @@
 use super::Ready;
 use crate::facets::Tile;
 use crate::ndf::Ndf;
-use crate::simulate::Simulation;
+use crate::simulate::{Deviation, Simulation};
 use crate::toolpath::{self, Summary};
 
 /// The parameters table.
@@ -105,7 +105,7 @@ fn relief_line(job: &super::Job, tile: &Tile) -> String {
     )
 }
 
-pub(super) fn program(ready: &Ready, s: &Summary, relief_mm: f64) -> Vec<(String, String)> {
+pub(super) fn program(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation) -> Vec<(String, String)> {
     let job = &ready.job;
     let t = &job.toolpath;
     let tools = t.tools_in_order();
@@ -150,11 +150,10 @@ pub(super) fn program(ready: &Ready, s: &Summary, relief_mm: f64) -> Vec<(String
             format!("{} mm/min, {} rpm", s.feed_mm_min, s.spindle_rpm),
         ),
         (
-            "gouge check".into(),
+            "gouge (simulated)".into(),
             format!(
-                "{} CL points, deepest {:.4} µm below the design",
-                s.checked_points,
-                s.max_gouge_um.max(0.0)
+                "{:.2} µm at most below the design in the simulated cut (the figure under Deviation from the design)",
+                dev.max_under_um.max(0.0)
             ),
         ),
     ]

@@ -14,6 +14,8 @@
 //!   "source": "reflectance" | "measured-ndf",
 //!   "brdf": "SPEC", "base": "SPEC" | null, "material": {"eta": [r,g,b], "k": [r,g,b]} | null,
 //!   "config": {...}   the NdfConfig used
+//!   "mass_beyond_grid": 0.0   fraction of the target's half-angle mass outside the grid (left out of both
+//!                             grids; absent in older files, read as 0)
 //! }
 //! ```
 //!
@@ -93,6 +95,9 @@ pub struct NdfFile {
     pub material: Option<ConductorIor>,
     /// Configuration used.
     pub config: NdfConfig,
+    /// Fraction of the target's half-angle mass outside the slope grid (left out of both distributions).
+    #[serde(default)]
+    pub mass_beyond_grid: f64,
 }
 
 /// An `ndf.json` that cannot be used.
@@ -129,6 +134,7 @@ impl From<&Ndf> for NdfFile {
             base: n.base_spec.clone(),
             material: n.material,
             config: n.config,
+            mass_beyond_grid: n.mass_beyond_grid,
         }
     }
 }

@@ -167,6 +167,9 @@ pub struct Ndf {
     pub material: Option<ConductorIor>,
     /// The configuration used.
     pub config: NdfConfig,
+    /// Fraction of the target's half-angle mass over the hemisphere that lies outside the slope grid, which
+    /// the normalised distributions leave out ([`halfangle::mass_beyond_grid`]).
+    pub mass_beyond_grid: f64,
 }
 
 /// The base lobe `K` as an odd-sized kernel on the grid spacing of `domain`, centred at slope 0 and cropped
@@ -208,6 +211,7 @@ pub fn run_with_kernel(cfg: &NdfConfig, brdf: &Brdf, base: Option<&Kernel>) -> R
             max_slope: domain.p_max,
         });
     }
+    let mass_beyond_grid = halfangle::mass_beyond_grid(brdf, domain, &cfg.half_angle);
     let mut target = observed.clone();
     let deconvolution = match base {
         None => LrReport::none(),
@@ -238,6 +242,23 @@ pub fn run_with_kernel(cfg: &NdfConfig, brdf: &Brdf, base: Option<&Kernel>) -> R
         base_spec: base.map(|k| k.label.clone()),
         material: brdf.material,
         config: *cfg,
+        mass_beyond_grid,
+    })
+}
+
+/// Above this fraction of the target's mass beyond the slope grid, the run says so.
+pub const GRID_ESCAPE_WARNING: f64 = 0.01;
+
+/// A warning when more than [`GRID_ESCAPE_WARNING`] of the target's half-angle mass lies beyond the slope
+/// grid: both the design and the verdict see only the part on the grid, renormalised.
+pub fn grid_warning(n: &Ndf) -> Option<String> {
+    (n.mass_beyond_grid > GRID_ESCAPE_WARNING).then(|| {
+        format!(
+            "{:.1}% of the target's half-angle mass lies beyond the NDF grid (|p|, |q| ≤ {:.3}, `ndf.max_angle_deg` = {}°): the design and the verdict see only the rest, renormalised, so the target is wider than anything designed or measured here",
+            n.mass_beyond_grid * 100.0,
+            n.config.domain().p_max,
+            n.config.max_angle_deg
+        )
     })
 }
 
@@ -263,6 +284,7 @@ pub fn render_png(grid: &SlopeGrid, title: &str) -> crate::plot::Canvas {
         y_label: "q = dz/dy".into(),
         value_label: "P22 (log)".into(),
         scale: crate::plot::Scale::Log { decades: 4.0 },
+        value_max: None,
         plot_px: 384,
         rgb: None,
     }

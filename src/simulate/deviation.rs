@@ -391,8 +391,9 @@ impl Deviation {
 impl Deviation {
     /// A false-colour map of simulated − design (µm) over the assessed cells, unreachable cells and the edge
     /// band grey; each pixel shows the cell of largest |deviation| in its block, so extremes stay visible, and
-    /// the colours span the 0.1–99.9 percentiles of what is shown (values beyond are clamped).
-    pub fn to_png(&self, title: &str, max_px: usize) -> crate::plot::Canvas {
+    /// the colours span the 0.1–99.9 percentiles of what is shown (values beyond are clamped). Returns the
+    /// figure and the colour scale's range `[low, high]`, µm, for its caption.
+    pub fn to_png(&self, title: &str, max_px: usize) -> (crate::plot::Canvas, [f64; 2]) {
         let f = self.nx.max(self.ny).div_ceil(max_px.max(1)).max(1);
         let (w, h) = ((self.nx / f).max(1), (self.ny / f).max(1));
         let mut v = vec![f64::NAN; w * h];
@@ -413,16 +414,20 @@ impl Deviation {
         }
         // colour range: the 0.1 and 99.9 percentiles, so that one extreme cell does not flatten the map
         let mut fin: Vec<f64> = v.iter().copied().filter(|d| d.is_finite()).collect();
+        fin.sort_by(f64::total_cmp);
+        let range = match fin.len() {
+            0 => [f64::NAN; 2],
+            n if n > 10 => [fin[n / 1000], fin[n - 1 - n / 1000]],
+            n => [fin[0], fin[n - 1]],
+        };
         if fin.len() > 10 {
-            fin.sort_by(f64::total_cmp);
-            let (lo, hi) = (fin[fin.len() / 1000], fin[fin.len() - 1 - fin.len() / 1000]);
             v.iter_mut()
                 .filter(|d| d.is_finite())
-                .for_each(|d| *d = d.clamp(lo, hi));
+                .for_each(|d| *d = d.clamp(range[0], range[1]));
         }
         let x0 = self.origin_mm[0];
         let y0 = self.origin_mm[1];
-        crate::plot::Heatmap {
+        let cv = crate::plot::Heatmap {
             values: &v,
             nx: w,
             ny: h,
@@ -431,12 +436,14 @@ impl Deviation {
             title: title.to_string(),
             x_label: "x (mm)".into(),
             y_label: "y (mm)".into(),
-            value_label: "sim - design (um)".into(),
+            value_label: "µm".into(),
             scale: crate::plot::Scale::Linear,
+            value_max: None,
             plot_px: 640,
             rgb: None,
         }
-        .render()
+        .render();
+        (cv, range)
     }
 }
 

@@ -320,7 +320,22 @@ pub enum MachineError {
         #[source]
         error: ProfileError,
     },
+    /// Neither a file nor the name of a shipped profile.
+    #[error("{path}: no such file, and not a shipped profile ({names})")]
+    Unknown {
+        /// The path tried.
+        path: String,
+        /// The shipped profiles' names.
+        names: String,
+    },
 }
+
+/// The machine profiles shipped in `machines/`, by name (compiled in, so they are found from any folder).
+pub const SHIPPED_PROFILES: [(&str, &str); 3] = [
+    ("grbl-3018", include_str!("../../machines/grbl-3018.toml")),
+    ("grbl-router-6040", include_str!("../../machines/grbl-router-6040.toml")),
+    ("linuxcnc-mill", include_str!("../../machines/linuxcnc-mill.toml")),
+];
 
 fn field(field: impl Into<String>, expected: &str, value: impl std::fmt::Display) -> ProfileError {
     ProfileError::Field {
@@ -357,6 +372,30 @@ impl Machine {
             path: path.display().to_string(),
             error,
         })
+    }
+
+    /// A profile by path (relative to `dir`) or, when no such file exists, by the name of a shipped profile
+    /// (`grbl-3018`, `grbl-router-6040`, `linuxcnc-mill`, with or without `.toml`). Returns where it came
+    /// from (`machines/NAME.toml (shipped)` for a shipped one) and the profile.
+    pub fn find(profile: &str, dir: &Path) -> Result<(std::path::PathBuf, Self), MachineError> {
+        let path = dir.join(profile);
+        if path.exists() {
+            return Self::load(&path).map(|m| (path, m));
+        }
+        let name = profile.trim_end_matches(".toml");
+        let name = name.strip_prefix("machines/").unwrap_or(name);
+        match SHIPPED_PROFILES.iter().find(|(n, _)| *n == name) {
+            Some((n, text)) => {
+                let shown = format!("machines/{n}.toml (shipped)");
+                Self::parse(text)
+                    .map(|m| (shown.clone().into(), m))
+                    .map_err(|error| MachineError::Profile { path: shown, error })
+            }
+            None => Err(MachineError::Unknown {
+                path: path.display().to_string(),
+                names: SHIPPED_PROFILES.map(|(n, _)| n).join(", "),
+            }),
+        }
     }
 
     /// Parse and validate profile text.

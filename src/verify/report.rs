@@ -13,6 +13,31 @@ pub struct Figure {
     pub caption: String,
     /// PNG bytes.
     pub png: Vec<u8>,
+    /// Labels the figure could not draw as given ([`crate::plot::Canvas::label_defects`]); the page lists
+    /// them under the figure with the class `label-defect`.
+    pub label_defects: Vec<String>,
+}
+
+impl Figure {
+    /// A figure from a drawn canvas (encoded here), keeping its label defects.
+    pub fn new(title: impl Into<String>, caption: impl Into<String>, canvas: &crate::plot::Canvas) -> Self {
+        Self::encoded(title, caption, canvas.to_png(), canvas)
+    }
+
+    /// A figure from a canvas already encoded as `png`.
+    pub fn encoded(
+        title: impl Into<String>,
+        caption: impl Into<String>,
+        png: Vec<u8>,
+        canvas: &crate::plot::Canvas,
+    ) -> Self {
+        Self {
+            title: title.into(),
+            caption: caption.into(),
+            png,
+            label_defects: canvas.label_defects.clone(),
+        }
+    }
 }
 
 /// Everything the page shows.
@@ -128,6 +153,9 @@ impl Report<'_> {
                 b64.encode(&f.png),
                 esc(&f.caption)
             ));
+            for d in &f.label_defects {
+                h.push_str(&format!("<p class=\"label-defect\">Figure defect: {}</p>", esc(d)));
+            }
         }
         h.push_str("<h2>Job parameters</h2>");
         h.push_str(&kv_table(&self.parameters));

@@ -192,6 +192,9 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
             .map(|r| r.scale)
             .unwrap_or([1.0, 1.0]),
     });
+    if let Some(w) = crate::ndf::grid_warning(input.ndf) {
+        notes.push(format!("{w}."));
+    }
     if input.tile.sampling.steep_mass > 1e-4 {
         notes.push(format!(
             "{:.2}% of the target NDF's mass lies beyond the machinable limit of {}° and was dropped from the facets.",
@@ -388,14 +391,14 @@ fn convergence(rounds: &[crate::design::Round], metrics: &Metrics, tol: &Toleran
             )
         })
         .collect();
-    Figure {
-        title: "Design rounds".into(),
-        caption: format!(
-            "Each round models what the ball leaves of the tile (its opening of the periodic tile, convolved with the scallop lobe) and scales the facet slopes so the model's variance meets the target's. The short dashed marks are the simulated G-code of the chosen round (round {chosen}), the grey lines the tolerance band. {}.",
+    Figure::new(
+        "Design rounds",
+        format!(
+            "Each round models what the ball leaves of the tile (its opening of the periodic tile, convolved with the scallop lobe) and scales the facet slopes so the model's variance meets the target's. The short dashed marks are the simulated G-code of the chosen round (round {chosen}), the grey dashed lines the tolerance band. {}.",
             rows.join("; ")
         ),
-        png: plot.render().to_png(),
-    }
+        &plot.render(),
+    )
 }
 
 /// The report's figures of the verification stage.
@@ -423,33 +426,33 @@ fn figures(
     let slices = render::slices(&items, &cfg.incident_deg);
     let spheres = render::sphere_row(&items, 260, 1.0);
     vec![
-        Figure {
-            title: "NDFs".into(),
-            caption: "Slope densities P22 (log scale over four decades) on the target's grid: the target's observed distribution, the design tile's facets convolved with the base lobe, and the simulated milled surface.".into(),
-            png: ndf_row.to_png(),
-        },
-        Figure {
-            title: "BRDF slices".into(),
-            caption: "f·cosθo (luminance) in the plane of incidence for each incident angle.".into(),
-            png: slices.to_png(),
-        },
-        Figure {
-            title: "Rendered preview".into(),
-            caption: "Spheres of the target material and of the fabricated surfaces' microfacet BRDFs under the same two lights (orthographic view, raster direction horizontal).".into(),
-            png: spheres.to_png(),
-        },
-        Figure {
-            title: "Wave optics of the milled surface".into(),
-            caption: format!(
-                "Kirchhoff BRDF (FFT, λ = {} µm, Gaussian coherence σ = {} µm, 3×3 windows) of a {} mm patch of the simulated surface at normal incidence, beside the geometric microfacet BRDF of the same patch. Wave albedo {wave_albedo:.3}. Scallop stepover {:.1} µm: {}",
+        Figure::new(
+            "NDFs",
+            "Slope densities P22 (log scale over four decades) on the target's grid: the target's observed distribution, the design tile's facets convolved with the base lobe, and the simulated milled surface.",
+            &ndf_row,
+        ),
+        Figure::new(
+            "BRDF slices",
+            "f·cosθo (luminance) in the plane of incidence for each incident angle.",
+            &slices,
+        ),
+        Figure::new(
+            "Rendered preview",
+            "Spheres of the target material and of the fabricated surfaces' microfacet BRDFs under the same two lights (orthographic view, raster direction horizontal).",
+            &spheres,
+        ),
+        Figure::new(
+            "Wave optics of the milled surface",
+            format!(
+                "Kirchhoff BRDF (FFT, λ = {} µm, Gaussian coherence σ = {} µm, 3×3 windows) of a {} mm patch of the simulated surface at normal incidence, beside the geometric microfacet BRDF of the same patch, on one colour scale (four decades below the larger peak), within the disc of real outgoing directions (grey beyond). Wave albedo {wave_albedo:.3}. Scallop stepover {:.1} µm: {}",
                 cfg.wavelength_um,
                 cfg.coherence_sigma_um,
                 cfg.wave_patch_mm,
                 input.stepover_mm * 1000.0,
                 if diffracts { "its diffraction orders fall inside the lobe (see Why)." } else { "no resolved diffraction orders inside the lobe." }
             ),
-            png: wave_png.to_png(),
-        },
+            wave_png,
+        ),
     ]
 }
 
