@@ -107,6 +107,20 @@ fn facet_counts_that_wrap_are_refused_on_the_command_line() {
         out.to_str().unwrap(),
     ]);
     refused(&o, &["facets"], &out);
+    // one column or one row of facets passed the old "at least 4 facets" check and then panicked in the
+    // periodic Poisson solver
+    for grid in ["1x6", "6x1", "1x1"] {
+        let o = brdfmill(&[
+            "facets",
+            "--ndf",
+            ndf.to_str().unwrap(),
+            "--facets",
+            grid,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        refused(&o, &["facets", "2×2"], &out);
+    }
 }
 
 #[test]

@@ -126,7 +126,9 @@ impl FacetsConfig {
         let bad = |field, reason: String| Err(FacetsError::Config { field, reason });
         // checked: a product that wraps would pass any bound
         let count = self.facets_x.checked_mul(self.facets_y);
-        if self.facets_x == 0 || self.facets_y == 0 || count.is_some_and(|n| n < 4) {
+        // each axis needs two facets: one column or row has no neighbour to integrate against (and the
+        // periodic Poisson solver's FFT needs two samples along x)
+        if self.facets_x < 2 || self.facets_y < 2 {
             return bad(
                 "facets",
                 format!("must be at least 2×2 facets, got {}x{}", self.facets_x, self.facets_y),
