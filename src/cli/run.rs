@@ -45,6 +45,9 @@ pub fn run(a: &Args) -> Result<i32> {
     std::fs::create_dir_all(&a.out)
         .map_err(|e| anyhow::anyhow!("--out {}: cannot create the folder: {e}", a.out.display()))?;
     println!("job       {} ({})", ready.job.name, a.job.display());
+    for p in &ready.prepared {
+        println!("input     {p}");
+    }
     let style = ProgressStyle::with_template("{spinner} {prefix:>9}  {msg} {elapsed}").unwrap();
     let mut bar: Option<ProgressBar> = None;
     let mut progress = |event: Progress| match event {

@@ -50,6 +50,10 @@ pub struct TargetSection {
     /// The material's own polish lobe (a BRDF spec), optional.
     #[serde(default)]
     pub polish: Option<String>,
+    /// When `brdf` names a `merl:` file that does not exist, a BRDF spec to write that file from first (so
+    /// an example can exercise the MERL reader without shipping 35 MB), optional.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub merl_from: Option<String>,
 }
 
 fn default_base() -> String {
@@ -153,6 +157,8 @@ pub struct Ready {
     pub machine_path: PathBuf,
     /// Where the steepest facet (`facets.max_slope_deg`) came from: `"job"` or the finishing tool.
     pub slope_cap_from: String,
+    /// Inputs the load prepared (a MERL file written from `target.merl_from`), for the user to be told.
+    pub prepared: Vec<String>,
 }
 
 impl Job {
@@ -195,6 +201,10 @@ impl Job {
             .parent()
             .map(Path::to_path_buf)
             .unwrap_or_else(|| PathBuf::from("."));
+        let prepared: Vec<String> = make_missing_merl(&job.target, &dir)
+            .map_err(|e| invalid(format!("`target.merl_from`: {e}")))?
+            .into_iter()
+            .collect();
         let target =
             Brdf::parse(&resolve_spec(&job.target.brdf, &dir)).map_err(|e| invalid(format!("`target.brdf`: {e}")))?;
         if !matches!(job.target.base.as_str(), "scallop" | "none") {
@@ -262,8 +272,41 @@ impl Job {
             machine,
             machine_path,
             slope_cap_from,
+            prepared,
         })
     }
+}
+
+/// `target.merl_from`: write the `merl:` file `target.brdf` names from that spec when the file is missing.
+/// Returns what was written, if anything.
+fn make_missing_merl(t: &TargetSection, dir: &Path) -> Result<Option<String>, String> {
+    let Some(from) = &t.merl_from else {
+        return Ok(None);
+    };
+    let spec = resolve_spec(&t.brdf, dir);
+    let Some(rest) = spec.strip_prefix("merl:") else {
+        return Err(format!(
+            "only a `merl:` target can be written from a spec; `target.brdf` is `{}`",
+            t.brdf
+        ));
+    };
+    let path = PathBuf::from(rest.split(',').next().unwrap_or(rest).trim());
+    if path.exists() {
+        return Ok(None);
+    }
+    let source = Brdf::parse(from).map_err(|e| e.to_string())?;
+    if matches!(source.model, crate::brdf::Model::Merl(_)) {
+        return Err(format!(
+            "`{from}` is itself a MERL file: name an analytic or measured model"
+        ));
+    }
+    crate::brdf::Merl::from_fn(|wi, wo| source.eval(wi, wo))
+        .write(&path)
+        .map_err(|e| e.to_string())?;
+    Ok(Some(format!(
+        "wrote {} from `{from}` (`target.merl_from`)",
+        path.display()
+    )))
 }
 
 /// Margin kept between a tile's relief and the finishing tool's flute length, fraction of the flutes.
@@ -427,6 +470,54 @@ pub use run::{run, Outcome, Progress, Stage};
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `target.merl_from` writes the missing file once, and what it wrote reads back as the model it came
+    /// from; it refuses a target that is not a `merl:` file.
+    #[test]
+    fn a_missing_merl_file_is_written_from_its_spec_once() {
+        let dir = tempfile::tempdir().unwrap();
+        let job = |brdf: &str| {
+            let p = dir.path().join("job.toml");
+            std::fs::write(
+                &p,
+                format!(
+                    "version = 1\nname = \"m\"\n[target]\nbrdf = \"{brdf}\"\nmerl_from = \"beckmann:alpha=0.3\"\n[machine]\nprofile = \"grbl-3018\"\n[toolpath]\ntool = \"ball05\"\n"
+                ),
+            )
+            .unwrap();
+            p
+        };
+        let ready = Job::load(&job("merl:m.binary")).unwrap();
+        assert_eq!(ready.prepared.len(), 1, "{:?}", ready.prepared);
+        let written = std::fs::metadata(dir.path().join("m.binary"))
+            .unwrap()
+            .modified()
+            .unwrap();
+        let again = Job::load(&job("merl:m.binary")).unwrap();
+        assert!(again.prepared.is_empty());
+        assert_eq!(
+            std::fs::metadata(dir.path().join("m.binary"))
+                .unwrap()
+                .modified()
+                .unwrap(),
+            written
+        );
+        let model = Brdf::parse("beckmann:alpha=0.3").unwrap();
+        let (wi, wo) = (
+            crate::geometry::spherical(0.4, 0.3),
+            crate::geometry::spherical(0.3, 2.9),
+        );
+        let (a, b) = (again.target.eval(&wi, &wo)[1], model.eval(&wi, &wo)[1]);
+        assert!((a / b - 1.0).abs() < 0.05, "{a} against {b}");
+        let e = Job::load(&job("beckmann:alpha=0.2"))
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(
+            e.contains("target.merl_from") && e.contains("only a `merl:` target"),
+            "{e}"
+        );
+    }
 
     #[test]
     fn shipped_profiles_are_found_by_name_and_a_wrong_name_lists_them() {
