@@ -1,5 +1,18 @@
-//! The move-list builder: feeds capped by the machine's Z limit, safe approaches, and the sequence that
-//! starts, changes and stops a tool.
+//! The move-list builder: feeds capped by the machine's Z limit, safe approaches with ramped entries, and
+//! the sequence that starts, changes and stops a tool.
+//!
+//! **Entries** ([`Builder::approach`]): rapid at safe z over the start of the run, rapid down to the lead
+//! height, feed straight down at the plunge feed through air to the *entry height* `z₀ = z + 1.1·doc +
+//! 5 µm` (every level engages at most the tool's depth of cut `doc` below the stock it meets — the
+//! roughing layers by construction, the finishing levels by their stock check — so at the start `p` of a
+//! run no stock stands above the tool's lower surface placed at `z₀`: for any cell at offset `d`,
+//! `before ≤ after + doc ≤ ball_p(d) + doc`; a roughing layer lowers that to the layer before it plus the
+//! ridges its tool leaves between paths — the stock the earlier layers left —
+//! which the acceptance tests check against the simulated stock), then ramp into the material along the run
+//! itself at the
+//! tool's `max_ramp_deg` θ at most: back and forth over its first `a = Δ/(2m·tanθ)` mm in `m` legs until
+//! `Δ = z₀ − z` is descended, never below the run's own cutter locations (so never below the design). A
+//! run too short for 50 legs is entered by a straight plunge at the plunge feed, and counted.
 //!
 //! **Start of a tool** ([`Builder::start_tool`]): the tool change (LinuxCNC `T M6 G43 H`, GRBL a named
 //! first tool or an `M0` pause, written by [`crate::gcode::emit`]), a Z-only retract to the clearance
@@ -14,6 +27,13 @@ use crate::gcode::moves::{self, Coolant, Move, P3};
 /// Clearance above the stock where lead-ins start and lead-outs end, mm.
 pub const LEAD_MM: f64 = super::check::RAPID_FLOOR_MM;
 
+/// The entry height above a run's start is this many depths of cut plus [`ENTRY_MARGIN_MM`]: the levels
+/// hold their depth of cut within the 5% the simulated stock resolves it to, and a little more.
+pub const ENTRY_DOC_FACTOR: f64 = 1.1;
+
+/// See [`ENTRY_DOC_FACTOR`], mm.
+pub const ENTRY_MARGIN_MM: f64 = 0.005;
+
 /// A move list under construction, with the tool's position and the current tool's limits.
 pub struct Builder<'m> {
     /// The moves so far.
@@ -24,7 +44,23 @@ pub struct Builder<'m> {
     pub machine: &'m Machine,
     /// Plunge feed of the current tool, mm/min.
     pub plunge_mm_min: f64,
+    /// Cutting feed of the current tool, mm/min (the ramps').
+    pub feed_mm_min: f64,
+    /// `tan` of the current tool's steepest entry ([`Tool::max_ramp_deg`]); infinite when it may plunge.
+    pub ramp_tan: f64,
+    /// Height above a run's start from which its entry ramps (see the module documentation), mm.
+    pub entry_mm: f64,
+    /// Highest the stock can stand during the current level, mm (a roughing layer's: the layer before it
+    /// plus the allowance; infinite when only the depth of cut bounds it). Entries ramp from no higher.
+    pub entry_ceiling_z: f64,
+    /// Entries ramped so far.
+    pub ramped_entries: usize,
+    /// Entries plunged straight (the tool may plunge, or the run is too short for a ramp).
+    pub plunged_entries: usize,
 }
+
+/// Most back-and-forth legs of one ramp; a run shorter than that needs is plunged into instead.
+pub const MAX_RAMP_LEGS: usize = 50;
 
 impl<'m> Builder<'m> {
     /// An empty program on `machine`, the tip assumed at `start`.
@@ -34,6 +70,12 @@ impl<'m> Builder<'m> {
             at: start,
             machine,
             plunge_mm_min: 1.0,
+            feed_mm_min: 1.0,
+            ramp_tan: f64::INFINITY,
+            entry_mm: 0.0,
+            entry_ceiling_z: f64::INFINITY,
+            ramped_entries: 0,
+            plunged_entries: 0,
         }
     }
 
@@ -68,8 +110,13 @@ impl<'m> Builder<'m> {
         self.at = p;
     }
 
-    /// Retract to safe z, travel at safe z, rapid down to the lead height, plunge to `p` at the plunge feed.
-    pub fn approach(&mut self, p: P3) {
+    /// Retract to safe z, travel at safe z over the start of `run`, rapid down to the lead height, feed down
+    /// through air to the entry height and ramp into the material along `run` (see the module
+    /// documentation). The tool ends at `run[0]`; the caller then cuts `run[1..]`.
+    pub fn approach(&mut self, run: &[P3]) {
+        let Some(&p) = run.first() else {
+            return;
+        };
         let safe = self.safe_z();
         if self.at[2] < safe {
             self.rapid([self.at[0], self.at[1], safe]);
@@ -77,7 +124,24 @@ impl<'m> Builder<'m> {
         self.rapid([p[0], p[1], safe]);
         self.rapid([p[0], p[1], LEAD_MM.max(p[2])]);
         let plunge = self.plunge_mm_min;
-        self.feed(p, plunge);
+        let top = (p[2] + self.entry_mm).min(self.entry_ceiling_z).min(LEAD_MM);
+        // within the margin there is nothing to ramp through
+        if top <= p[2] + ENTRY_MARGIN_MM + 1e-9 {
+            self.feed(p, plunge);
+            return;
+        }
+        let legs = ramp_legs(run, top - p[2], self.ramp_tan);
+        let Some(points) = legs else {
+            self.plunged_entries += 1;
+            self.feed(p, plunge);
+            return;
+        };
+        self.feed([p[0], p[1], top], plunge);
+        let f = self.feed_mm_min;
+        for q in points {
+            self.feed(q, f);
+        }
+        self.ramped_entries += 1;
     }
 
     /// Feed along `pts` at `f`.
@@ -104,6 +168,13 @@ impl<'m> Builder<'m> {
             self.moves.push(Move::Coolant(coolant));
         }
         self.plunge_mm_min = cut.plunge_mm_min;
+        self.feed_mm_min = cut.feed_mm_min;
+        self.ramp_tan = if tool.max_ramp_deg >= 90.0 {
+            f64::INFINITY
+        } else {
+            tool.max_ramp_deg.to_radians().tan()
+        };
+        self.entry_mm = ENTRY_DOC_FACTOR * cut.max_depth_of_cut_mm + ENTRY_MARGIN_MM;
     }
 
     /// Lift out of the cut, retract to the clearance height, park, spindle and coolant off.
@@ -122,5 +193,111 @@ impl<'m> Builder<'m> {
         if self.machine.program.coolant != Coolant::Off {
             self.moves.push(Move::Coolant(Coolant::Off));
         }
+    }
+}
+
+/// The points of a ramp descending `depth` mm into the start of `run` at slope `tan` at most: `m` legs back
+/// and forth over the run's first `a` mm (`2·m·a·tan = depth`, `a` no longer than the run), each point's z
+/// the straight descent by the distance travelled, never below the run's own z at that point, the last
+/// point the run's start. `None` when the tool may plunge (`tan` infinite), or the run would need more than
+/// [`MAX_RAMP_LEGS`] legs.
+pub fn ramp_legs(run: &[P3], depth: f64, tan: f64) -> Option<Vec<P3>> {
+    if !tan.is_finite() || run.len() < 2 {
+        return None;
+    }
+    // the run's arc length in x, y at each point
+    let mut s = vec![0.0];
+    for w in run.windows(2) {
+        s.push(s[s.len() - 1] + (w[1][0] - w[0][0]).hypot(w[1][1] - w[0][1]));
+    }
+    let avail = s[s.len() - 1];
+    let total = depth / tan;
+    let m = (total / (2.0 * avail)).ceil().max(1.0) as usize;
+    if avail <= 0.0 || m > MAX_RAMP_LEGS {
+        return None;
+    }
+    let a = total / (2 * m) as f64;
+    // the run at arc length t (t ≤ avail)
+    let at = |t: f64| -> P3 {
+        let k = s.partition_point(|v| *v < t).clamp(1, run.len() - 1);
+        let (s0, s1) = (s[k - 1], s[k]);
+        let f = if s1 > s0 {
+            ((t - s0) / (s1 - s0)).clamp(0.0, 1.0)
+        } else {
+            1.0
+        };
+        let (p, q) = (run[k - 1], run[k]);
+        [
+            p[0] + f * (q[0] - p[0]),
+            p[1] + f * (q[1] - p[1]),
+            p[2] + f * (q[2] - p[2]),
+        ]
+    };
+    // the run's own vertices within the leg, then its end
+    let inner: Vec<f64> = s.iter().copied().filter(|v| *v > 0.0 && *v < a).collect();
+    let top = run[0][2] + depth;
+    let mut out = vec![];
+    let mut travelled = 0.0;
+    let mut pos = 0.0;
+    for leg in 0..2 * m {
+        let forward = leg % 2 == 0;
+        let stops: Vec<f64> = if forward {
+            inner.iter().copied().chain(std::iter::once(a)).collect()
+        } else {
+            inner.iter().rev().copied().chain(std::iter::once(0.0)).collect()
+        };
+        for t in stops {
+            travelled += (t - pos).abs();
+            pos = t;
+            let q = at(t);
+            out.push([q[0], q[1], (top - tan * travelled).max(q[2])]);
+        }
+    }
+    if let Some(last) = out.last_mut() {
+        *last = run[0];
+    }
+    Some(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A ramp into a flat run: 2m legs, every segment at the ramp slope (within rounding), ending at the
+    /// run's start; on a run that rises, never below it.
+    #[test]
+    fn ramps_descend_at_the_angle_and_end_at_the_run() {
+        let run: Vec<P3> = (0..=100).map(|i| [i as f64 * 0.01, 0.5, -0.3]).collect();
+        let tan = 3f64.to_radians().tan();
+        let pts = ramp_legs(&run, 0.2, tan).unwrap();
+        let mut prev = [0.0, 0.5, -0.1];
+        let mut horizontal = 0.0;
+        for q in &pts {
+            let d = (q[0] - prev[0]).hypot(q[1] - prev[1]);
+            horizontal += d;
+            if d > 1e-9 {
+                let slope = (prev[2] - q[2]) / d;
+                assert!(slope <= tan * (1.0 + 1e-9) && slope >= 0.0, "slope {slope} at {q:?}");
+            }
+            prev = *q;
+        }
+        assert_eq!(*pts.last().unwrap(), run[0]);
+        assert!(
+            (horizontal - 0.2 / tan).abs() < 1e-9,
+            "{horizontal} against {}",
+            0.2 / tan
+        );
+        assert!(pts.iter().all(|q| q[0] <= 1.0 + 1e-12 && q[0] >= 0.0));
+        // a rising run: the ramp rides on it where it is higher than the descent
+        let rising: Vec<P3> = (0..=100)
+            .map(|i| [i as f64 * 0.01, 0.0, -0.3 + 0.5 * i as f64 * 0.01])
+            .collect();
+        let pts = ramp_legs(&rising, 0.2, tan).unwrap();
+        for q in &pts {
+            assert!(q[2] >= -0.3 + 0.5 * q[0] - 1e-12, "{q:?} below the run");
+        }
+        // plunging allowed, or a run too short for 50 legs: no ramp
+        assert!(ramp_legs(&run, 0.2, f64::INFINITY).is_none());
+        assert!(ramp_legs(&run[..2], 0.2, tan).is_none());
     }
 }

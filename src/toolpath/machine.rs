@@ -149,6 +149,10 @@ pub struct Tool {
     pub number: u32,
     /// Number of flutes (for the chip load `feed / (rpm · flutes)` in the header); default 2.
     pub flutes: u32,
+    /// Steepest entry into material, degrees from the horizontal: every entry ramps down along its pass at
+    /// this angle at most (90: a straight plunge at the plunge feed is allowed). Default
+    /// [`default_ramp_deg`] by kind.
+    pub max_ramp_deg: f64,
     /// Cutting data in aluminium (a profile may spell the key `aluminum`).
     #[serde(alias = "aluminum")]
     pub aluminium: CuttingData,
@@ -170,6 +174,8 @@ struct ToolRecord {
     number: u32,
     #[serde(default = "two")]
     flutes: u32,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    max_ramp_deg: Option<f64>,
     #[serde(alias = "aluminum")]
     aluminium: CuttingData,
     wax: CuttingData,
@@ -177,6 +183,16 @@ struct ToolRecord {
 
 fn two() -> u32 {
     2
+}
+
+/// The entry ramp angle a tool gets when its profile gives none, degrees: 3° for a flat or bull-nose end
+/// mill (its centre barely cuts, so it must not plunge; 2–5° is the usual range), 10° for a ball-nose, whose
+/// centre cuts but at zero surface speed.
+pub fn default_ramp_deg(shape: Shape) -> f64 {
+    match shape.normalized() {
+        Shape::Ball { .. } => 10.0,
+        Shape::Flat { .. } | Shape::Bull { .. } => 3.0,
+    }
 }
 
 impl TryFrom<ToolRecord> for Tool {
@@ -190,6 +206,7 @@ impl TryFrom<ToolRecord> for Tool {
             flute_length_mm: r.flute_length_mm,
             number: r.number,
             flutes: r.flutes,
+            max_ramp_deg: r.max_ramp_deg.unwrap_or_else(|| default_ramp_deg(shape)),
             aluminium: r.aluminium,
             wax: r.wax,
         })
@@ -206,6 +223,7 @@ impl From<Tool> for ToolRecord {
             flute_length_mm: t.flute_length_mm,
             number: t.number,
             flutes: t.flutes,
+            max_ramp_deg: Some(t.max_ramp_deg),
             aluminium: t.aluminium,
             wax: t.wax,
         }
@@ -491,6 +509,9 @@ impl Machine {
             }
             if self.dialect == Dialect::Linuxcnc && t.number == 0 {
                 return Err(field(f("number"), "≥ 1 (LinuxCNC's `T0 M6` unloads the spindle)", 0));
+            }
+            if !(t.max_ramp_deg > 0.0 && t.max_ramp_deg <= 90.0) {
+                return Err(field(f("max_ramp_deg"), "an angle in (0, 90] degrees", t.max_ramp_deg));
             }
             if t.flutes == 0 || t.flutes > 16 {
                 return Err(field(f("flutes"), "in 1..=16", t.flutes));

@@ -164,6 +164,13 @@ pub struct Summary {
     pub feed_mm_min: f64,
     /// Spindle speed, rev/min.
     pub spindle_rpm: f64,
+    /// Entries into material that ramp down along their pass at the tool's `max_ramp_deg` at most.
+    #[serde(default)]
+    pub ramped_entries: usize,
+    /// Entries plunged straight at the plunge feed (the tool's `max_ramp_deg` is 90, or the run was too
+    /// short for a ramp).
+    #[serde(default)]
+    pub plunged_entries: usize,
 }
 
 /// A finished program.
@@ -494,7 +501,7 @@ fn finishing(
             Strategy::Oneway => pass.iter().rev().copied().collect(),
         };
         if first || strategy == Strategy::Oneway {
-            b.approach(pts[0]);
+            b.approach(&pts);
             first = false;
         } else {
             let link = link_points(design, dc, b.at, pts[0], |z| z);
@@ -585,6 +592,7 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
     let (checked_points, max_gouge) = gouge_check(&design, &dc, &passes);
     finishing(&mut b, &design, &dc, &passes, strategy, feed, tol);
     b.stop_tool();
+    let (ramped_entries, plunged_entries) = (b.ramped_entries, b.plunged_entries);
     let moves = b.moves;
 
     check::check(&moves, start, machine, rough).map_err(ToolpathError::Machine)?;
@@ -638,6 +646,8 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         max_gouge_um: max_gouge * 1000.0,
         feed_mm_min: feed,
         spindle_rpm: cut.spindle_rpm,
+        ramped_entries,
+        plunged_entries,
     };
     Ok(Toolpath { moves, gcode, summary })
 }

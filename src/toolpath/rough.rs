@@ -37,6 +37,19 @@ pub fn stepover_mm(shape: Shape, leave: f64) -> f64 {
     }
 }
 
+/// Height of the ridges between paths `stepover` apart: a ball's scallop, none for a flat, a bull's corner
+/// scallop over what its flat part does not cover, mm.
+pub fn scallop_mm(shape: Shape, stepover: f64) -> f64 {
+    match shape.normalized() {
+        Shape::Ball { diameter_mm } => raster::scallop_for_stepover(diameter_mm / 2.0, stepover),
+        Shape::Flat { .. } => 0.0,
+        Shape::Bull {
+            diameter_mm,
+            corner_radius_mm: rc,
+        } => raster::scallop_for_stepover(rc, (stepover - (diameter_mm - 2.0 * rc)).max(0.0)),
+    }
+}
+
 /// The roughing passes at `c(x) = CL_rough + leave` and the number of layers they need.
 pub struct RoughPlan {
     /// Rows at the allowance surface, in increasing u.
@@ -45,6 +58,8 @@ pub struct RoughPlan {
     pub layers: usize,
     /// Roughing stepover, mm.
     pub stepover_mm: f64,
+    /// Height of the ridges the roughing tool leaves between its paths, mm (0 for a flat end mill).
+    pub scallop_mm: f64,
 }
 
 /// The rows of the roughing tool and the layer count (unbounded counts are the caller's to refuse).
@@ -59,6 +74,7 @@ pub fn plan(design: &RotatedDesign, rdc: &DropCutter, shape: Shape, doc: f64, le
         rows,
         layers,
         stepover_mm: rs,
+        scallop_mm: scallop_mm(shape, rs),
     }
 }
 
@@ -114,7 +130,7 @@ pub fn emit_level(b: &mut Builder, lv: &Level, link: &dyn Fn(P3, P3) -> Vec<P3>)
                 n == 0 && d <= 1.5 * lv.stepover_mm + 2.0 * lv.pitch_mm
             });
             if first || !near {
-                b.approach(run[0]);
+                b.approach(&run);
                 first = false;
             } else {
                 let l = link(b.at, run[0]);
@@ -162,8 +178,11 @@ pub fn emit(
             pitch_mm,
             tol_mm: tol,
         };
+        // no stock above the layer before but the ridges between its paths
+        b.entry_ceiling_z = zp + rp.scallop_mm + super::build::ENTRY_MARGIN_MM;
         emit_level(b, &lv, &|a, e| link(a, e, zl));
     }
+    b.entry_ceiling_z = f64::INFINITY;
 }
 
 #[cfg(test)]
