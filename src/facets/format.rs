@@ -10,8 +10,14 @@
 //!            slopes and centre heights per position, row-major (row y, column x), z relative to the top
 //!   "heightfield": {"file": "tile.npy", "nx", "ny", "pitch_mm", "periodic": true, "min_mm", "max_mm"},
 //!   "stats": {"mean": [p, q], "cov": [[pp, pq], [pq, qq]], "relief_mm",
-//!             "energy": {"C", "I", "V", "valleys"}, "energy_random": {"C", "I", "V", "valleys"},
-//!             "sampling": {...}, "seams": {...}, "anneal": {"trace", "trace_every", "proposals", "accepted", "w_v"}}
+//!             "energy": {"C", "I", "V", "valleys", "S", "steps_sq", "R", "heights_sq"},
+//!             "energy_random": {same keys},   C + I + V + S + R is what the annealing lowers: S is
+//!             the step term (step_weight × Σ step²/a² = steps_sq), R the relief term (relief_weight ×
+//!             Σ z²/a² = heights_sq); S, steps_sq, R, heights_sq read as 0 from files that lack them
+//!             "sampling": {"steep_mass", "ks_random", "ks_halton", "ks_cvt", "energy_statistic",
+//!                          "energy_p_value", "mean_removed", "lloyd"},
+//!             "seams": {"max_interior_um", "max_seam_um", "rms_um"},
+//!             "anneal": {"trace", "trace_every", "proposals", "accepted", "w_v"}}
 //! }
 //! ```
 
