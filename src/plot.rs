@@ -463,6 +463,7 @@ mod tests {
             series: vec![series("a long legend entry", 1.0, false), series("b", -1.0, true)],
             size_px: (200, 100),
             log_y: false,
+            whole_x: false,
         };
         let cv = plot.render();
         assert!(cv.label_defects.is_empty(), "{:?}", cv.label_defects);
@@ -558,6 +559,8 @@ pub struct LinePlot {
     pub size_px: (u32, u32),
     /// log10 y axis (values ≤ 0 are dropped).
     pub log_y: bool,
+    /// x ticks at whole numbers only (the x axis counts something, e.g. design rounds).
+    pub whole_x: bool,
 }
 
 /// Colours for up to six series (colour-blind friendly, Okabe–Ito).
@@ -621,7 +624,14 @@ impl LinePlot {
         let px = |x: f64| left + ((x - x0) / (x1 - x0) * pw as f64).round() as i32;
         let py = |y: f64| top + ph - ((y - y0) / (y1 - y0) * ph as f64).round() as i32;
         cv.frame(left - 1, top - 1, (pw + 2) as u32, (ph + 2) as u32);
-        for t in nice_ticks(x0, x1, 6) {
+        let x_ticks = if self.whole_x {
+            let (lo, hi) = (x0.ceil() as i64, x1.floor() as i64);
+            let step = ((hi - lo) / 8 + 1).max(1);
+            (lo..=hi).step_by(step as usize).map(|t| t as f64).collect()
+        } else {
+            nice_ticks(x0, x1, 6)
+        };
+        for t in x_ticks {
             cv.line(px(t), top + ph, px(t), top + ph + 4);
             cv.text(px(t), top + ph + 14, &fmt_tick(t), Alignment::Center);
         }
@@ -642,6 +652,7 @@ impl LinePlot {
         for s in &self.series {
             let mut prev: Option<(i32, i32)> = None;
             let mut phase = 0.0;
+            let mut drawn = vec![];
             for p in &s.points {
                 let y = ty(p.1);
                 if !y.is_finite() {
@@ -653,6 +664,15 @@ impl LinePlot {
                     phase = draw_series_line(&mut cv, a, cur, s.color, s.dashed, phase);
                 }
                 prev = Some(cur);
+                drawn.push(cur);
+            }
+            // a series of one point has no segment: mark the point itself
+            if let [(x, y)] = drawn[..] {
+                for dy in -2..=2 {
+                    for dx in -2..=2 {
+                        cv.put((x + dx) as i64, (y + dy) as i64, s.color);
+                    }
+                }
             }
         }
         for (s, row, x) in legend {

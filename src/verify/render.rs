@@ -104,6 +104,7 @@ pub fn slices(items: &[(&str, BrdfFn)], incident_deg: &[f64]) -> Canvas {
                 series,
                 size_px: (360, 220),
                 log_y: false,
+                whole_x: false,
             }
             .render()
         })

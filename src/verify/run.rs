@@ -381,6 +381,7 @@ fn convergence(rounds: &[crate::design::Round], metrics: &Metrics, tol: &Toleran
         ],
         size_px: (460, 260),
         log_y: false,
+        whole_x: true,
     };
     let rows: Vec<String> = rounds
         .iter()
