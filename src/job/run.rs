@@ -236,7 +236,7 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
         &mut |round| progress(Progress::Round(round)),
     )
     .map_err(stage_err("facets"))?;
-    let (tile, tile_png) = facets_stage(&nd.ndf, d.tile, &mut o)?;
+    let (tile, tile_figure) = facets_stage(&nd.ndf, d.tile, &mut o)?;
     outcome.rounds = (d.rounds, d.chosen);
     step(&mut *progress, Stage::Facets, &mut timings, false);
     write_state(&mut o, &job.name, &timings, "running")?;
@@ -266,7 +266,7 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
     let shape = Shape::Ball {
         diameter_mm: tool.diameter_mm(),
     };
-    let (sim, dev, sim_png, dev_png) = simulate_stage(ready, shape, &program.gcode, &tile.heightfield, &mut o)?;
+    let (sim, dev, sim_figures) = simulate_stage(ready, shape, &program.gcode, &tile.heightfield, &mut o)?;
     step(&mut *progress, Stage::Simulate, &mut timings, false);
     write_state(&mut o, &job.name, &timings, "running")?;
     if until == Stage::Simulate {
@@ -298,14 +298,8 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
     let metrics_json = serde_json::to_string_pretty(&v.metrics).map_err(stage_err("verify"))?;
     o.write("metrics.json", metrics_json.as_bytes())?;
     let mut figures = v.figures;
-    figures.extend(surface_figures(
-        ready,
-        &tool.diameter_mm(),
-        &dev,
-        tile_png,
-        sim_png,
-        dev_png,
-    ));
+    figures.push(tile_figure);
+    figures.extend(sim_figures);
     let html = report::Report {
         title: job.name.clone(),
         metrics: &v.metrics,
@@ -366,8 +360,8 @@ fn scallop_lobe(ready: &Ready, nd: &NdfStage, r: f64, stepover: f64) -> Result<K
 }
 
 /// The design loop's tile → `tile.json`, `tile.npy`, `tile.png`, `tile.stl`. Returns the tile and its relief
-/// PNG with the figure's label defects.
-fn facets_stage(n: &Ndf, tile: Tile, o: &mut Out) -> Result<(Tile, Png), JobError> {
+/// report figure.
+fn facets_stage(n: &Ndf, tile: Tile, o: &mut Out) -> Result<(Tile, report::Figure), JobError> {
     let tile_file = TileFile::new(
         &tile,
         facets::format::Source {
@@ -378,13 +372,21 @@ fn facets_stage(n: &Ndf, tile: Tile, o: &mut Out) -> Result<(Tile, Png), JobErro
         "tile.npy",
     );
     let tile_canvas = tile.relief_png();
-    let tile_png = (tile_canvas.to_png(), tile_canvas.label_defects);
+    let c = &tile.config;
+    let tile_figure = report::Figure::new(
+        "Design tile",
+        format!(
+            "The periodic facet heightfield ({}×{} facets of {} mm), shaded relief tinted by height.",
+            c.facets_x, c.facets_y, c.facet_mm
+        ),
+        &tile_canvas,
+    );
     o.write("tile.json", tile_file.to_json().as_bytes())?;
     tile.heightfield.write_npy(&o.dir.join("tile.npy"))?;
     o.written.push(o.dir.join("tile.npy"));
-    o.write("tile.png", &tile_png.0)?;
+    o.write("tile.png", &tile_figure.png)?;
     o.write("tile.stl", &tile.stl())?;
-    Ok((tile, tile_png))
+    Ok((tile, tile_figure))
 }
 
 /// G-code → milled surface and its deviation from the design: `sim.npy`, `sim.png`, `deviation.png`,
@@ -395,7 +397,7 @@ fn simulate_stage(
     gcode: &str,
     design: &crate::heightfield::Heightfield,
     o: &mut Out,
-) -> Result<(Simulation, Deviation, Png, DeviationPng), JobError> {
+) -> Result<(Simulation, Deviation, [report::Figure; 2]), JobError> {
     let job = &ready.job;
     let scfg = SimulateConfig {
         tool: shape,
@@ -411,69 +413,40 @@ fn simulate_stage(
     sim.heightfield.write_npy(&o.dir.join("sim.npy"))?;
     o.written.push(o.dir.join("sim.npy"));
     let sim_canvas = sim.heightfield.relief_png("simulated milled surface", 1024);
-    let sim_png = (sim_canvas.to_png(), sim_canvas.label_defects);
-    o.write("sim.png", &sim_png.0)?;
+    let sim_figure = report::Figure::new(
+        "Simulated milled surface",
+        format!(
+            "The stock after the program, simulated at {} µm.",
+            job.simulate.pitch_um
+        ),
+        &sim_canvas,
+    );
+    o.write("sim.png", &sim_figure.png)?;
     let (dev_canvas, dev_range_um) = dev.to_png("simulated - design (µm)", 1024);
-    let dev_png = (dev_canvas.to_png(), dev_canvas.label_defects, dev_range_um);
-    o.write("deviation.png", &dev_png.0)?;
+    let [lo, hi] = dev_range_um;
+    let dev_figure = report::Figure::new(
+        "Deviation from the design",
+        format!(
+            "Simulated minus design height where the {} mm ball can reach the design; grey where it cannot ({:.2}% of the interior: concave corners narrower than the bit) and in the edge band. \
+             The colours span {lo:.2} to {hi:.2} µm (the 0.1 and 99.9 percentiles of the cells shown; cells beyond take the end colours). \
+             Largest material left where reachable {:.2} µm, anywhere {:.2} µm (in the unreachable corners); deepest cut below the design (gouge) {:.2} µm.",
+            shape.diameter_mm(),
+            dev.unreachable_fraction * 100.0,
+            dev.max_over_reachable_um,
+            dev.max_over_um,
+            dev.max_under_um.max(0.0),
+        ),
+        &dev_canvas,
+    );
+    o.write("deviation.png", &dev_figure.png)?;
     o.write(
         "sim.json",
         SimFile::new(&sim, &scfg, "program.nc", Some(&dev), Some("tile.npy".into()))
             .to_json()
             .as_bytes(),
     )?;
-    Ok((sim, dev, sim_png, dev_png))
+    Ok((sim, dev, [sim_figure, dev_figure]))
 }
-
-/// The report's figures of the surfaces: design tile, simulated cut, deviation.
-fn surface_figures(
-    ready: &Ready,
-    diameter_mm: &f64,
-    dev: &Deviation,
-    tile_png: Png,
-    sim_png: Png,
-    dev_png: DeviationPng,
-) -> Vec<report::Figure> {
-    let job = &ready.job;
-    let [lo, hi] = dev_png.2;
-    vec![
-        report::Figure {
-            title: "Design tile".into(),
-            caption: format!(
-                "The periodic facet heightfield ({}×{} facets of {} mm), shaded relief tinted by height.",
-                job.facets.facets_x, job.facets.facets_y, job.facets.facet_mm
-            ),
-            png: tile_png.0,
-            label_defects: tile_png.1,
-        },
-        report::Figure {
-            title: "Simulated milled surface".into(),
-            caption: format!("The stock after the program, simulated at {} µm.", job.simulate.pitch_um),
-            png: sim_png.0,
-            label_defects: sim_png.1,
-        },
-        report::Figure {
-            title: "Deviation from the design".into(),
-            caption: format!(
-                "Simulated minus design height where the {diameter_mm} mm ball can reach the design; grey where it cannot ({:.2}% of the interior: concave corners narrower than the bit) and in the edge band. \
-                 The colours span {lo:.2} to {hi:.2} µm (the 0.1 and 99.9 percentiles of the cells shown; cells beyond take the end colours). \
-                 Largest material left where reachable {:.2} µm, anywhere {:.2} µm (in the unreachable corners); deepest cut below the design (gouge) {:.2} µm.",
-                dev.unreachable_fraction * 100.0,
-                dev.max_over_reachable_um,
-                dev.max_over_um,
-                dev.max_under_um.max(0.0),
-            ),
-            png: dev_png.0,
-            label_defects: dev_png.1,
-        },
-    ]
-}
-
-/// An encoded figure and the labels it could not draw as given.
-type Png = (Vec<u8>, Vec<String>);
-
-/// The deviation figure as [`Png`] with its colour scale's range, µm.
-type DeviationPng = (Vec<u8>, Vec<String>, [f64; 2]);
 
 /// The artifact table of the report.
 fn listed(written: &[PathBuf]) -> Vec<(String, String)> {

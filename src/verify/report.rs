@@ -21,20 +21,10 @@ pub struct Figure {
 impl Figure {
     /// A figure from a drawn canvas (encoded here), keeping its label defects.
     pub fn new(title: impl Into<String>, caption: impl Into<String>, canvas: &crate::plot::Canvas) -> Self {
-        Self::encoded(title, caption, canvas.to_png(), canvas)
-    }
-
-    /// A figure from a canvas already encoded as `png`.
-    pub fn encoded(
-        title: impl Into<String>,
-        caption: impl Into<String>,
-        png: Vec<u8>,
-        canvas: &crate::plot::Canvas,
-    ) -> Self {
         Self {
             title: title.into(),
             caption: caption.into(),
-            png,
+            png: canvas.to_png(),
             label_defects: canvas.label_defects.clone(),
         }
     }
