@@ -389,12 +389,65 @@ fn stock_left(design: &raster::RotatedDesign, moves: &[Move], start: P3, bit: Sh
     }
 }
 
+/// Columns per block of the stock's change map ([`stock_cl_rows`]).
+const CHANGE_BLOCK: usize = 64;
+
+/// The CL surface of `cutter` over `stock` along each pass `vs[k]`, at its columns `cols[k]`, into `rows[k]`.
+/// With `changed` (per stock row, per [`CHANGE_BLOCK`] columns: whether the stock there was lowered since
+/// `rows` was computed), only the columns whose cutter covers a changed block are recomputed: the others'
+/// samples are the same, so are their values.
+fn stock_cl_rows(
+    design: &raster::RotatedDesign,
+    sdc: &dropcutter::DropCutter,
+    vs: &[f64],
+    cols: &[std::ops::Range<usize>],
+    rows: &mut [Vec<f64>],
+    changed: Option<&[bool]>,
+) {
+    let (p, nx, ny) = (design.hf.pitch_mm, design.hf.nx, design.hf.ny);
+    let nb = nx.div_ceil(CHANGE_BLOCK);
+    let r = sdc.cutter().radius_mm();
+    // blocks either side an output block's cutter reaches into
+    let reach = ((r / p).ceil() as usize + 1).div_ceil(CHANGE_BLOCK);
+    rows.par_iter_mut().zip(vs).zip(cols).for_each(|((row, v), c)| {
+        let y = v - design.v0;
+        let Some(changed) = changed else {
+            sdc.row_from(y, c.start, row);
+            return;
+        };
+        let jc = y / p - 0.5;
+        let j0 = ((jc - r / p).floor() - 1.0).max(0.0) as usize;
+        let j1 = (((jc + r / p).ceil() + 1.0).max(0.0) as usize).min(ny.saturating_sub(1));
+        let mut dirty = vec![false; nb];
+        for j in j0..=j1 {
+            for (b, _) in changed[j * nb..(j + 1) * nb].iter().enumerate().filter(|(_, c)| **c) {
+                dirty[b.saturating_sub(reach)..(b + reach + 1).min(nb)].fill(true);
+            }
+        }
+        let mut b = 0;
+        while b < nb {
+            if !dirty[b] {
+                b += 1;
+                continue;
+            }
+            let e = (b..nb).find(|&e| !dirty[e]).unwrap_or(nb);
+            let (lo, hi) = ((b * CHANGE_BLOCK).max(c.start), (e * CHANGE_BLOCK).min(c.end));
+            if lo < hi {
+                sdc.row_from(y, lo, &mut row[lo - c.start..hi - c.start]);
+            }
+            b = e;
+        }
+    });
+}
+
 /// Intermediate finishing levels where the finishing tool would otherwise cut deeper than its depth of cut
 /// `doc`. With `S` the CL surface of the finishing tool over the stock as it stands (the lowest its tip can
 /// sit without touching it), the tip engages `S − z` deep. While some point has `S − CL > doc`, a level runs
-/// at `z = max(CL, S − doc)` where material remains above CL (`S > CL`), and the stock is then re-swept with
-/// that level's moves ([`stock_left`]), so each level is measured against the stock the one before it left,
-/// not against an estimate. The final raster at CL then engages at most `doc`. Returns the number of levels.
+/// at `z = S − doc` over the points where `S − CL > doc` (each run keeps one point at `CL` at either end;
+/// gaps up to two tool diameters are ridden at `max(CL, S − doc)`), and the stock is then re-swept with that
+/// level's moves ([`stock_left`]), so each level is measured against the stock the one before it left, not
+/// against an estimate. Points within the depth of cut are left to the final raster, which then engages at
+/// most `doc` everywhere. Returns the number of levels.
 #[allow(clippy::too_many_arguments)]
 fn intermediate_levels(
     b: &mut Builder,
@@ -410,16 +463,28 @@ fn intermediate_levels(
 ) -> Result<usize, ToolpathError> {
     let gap_points = (rough::GAP_DIAMETERS * dc.cutter().diameter_mm() / design.hf.pitch_mm).ceil() as usize;
     let relief = -finals.iter().flatten().map(|p| p[2]).fold(0.0, f64::min);
-    // each level lowers S by doc where it is above CL; a few more than relief/doc cover the rounding
+    // each level lowers S by doc where it is above CL + doc; a few more than relief/doc cover the rounding
     let most = (relief / doc).ceil() as usize + 3;
+    let cols: Vec<std::ops::Range<usize>> = vs.iter().map(|v| design.pass_columns(*v)).collect();
+    debug_assert!(cols.iter().zip(finals).all(|(c, f)| c.len() == f.len()));
+    let mut s_rows: Vec<Vec<f64>> = cols.iter().map(|c| vec![0.0; c.len()]).collect();
+    let cutter = dc.cutter();
+    stock_cl_rows(
+        design,
+        &dropcutter::DropCutter::new(stock, cutter, dropcutter::Edge::Open),
+        vs,
+        &cols,
+        &mut s_rows,
+        None,
+    );
     let mut levels = 0;
     loop {
-        let sdc = dropcutter::DropCutter::new(stock, dc.cutter(), dropcutter::Edge::Open);
-        let srows: Vec<Vec<P3>> = vs.par_iter().map(|v| design.pass(&sdc, *v, |z| z.min(0.0))).collect();
+        // the stock never stands above its top
+        let over = |f: &P3, s: f64| s.min(0.0) - f[2];
         let worst = finals
             .iter()
-            .zip(&srows)
-            .flat_map(|(f, s)| f.iter().zip(s).map(|(f, s)| s[2] - f[2]))
+            .zip(&s_rows)
+            .flat_map(|(f, s)| f.iter().zip(s).map(|(f, s)| over(f, *s)))
             .fold(0.0, f64::max);
         if worst <= doc + 1e-6 {
             return Ok(levels);
@@ -433,13 +498,13 @@ fn intermediate_levels(
         b.moves.push(Move::Comment("finishing: intermediate level"));
         let mut rows = Vec::with_capacity(finals.len());
         let mut cuts = Vec::with_capacity(finals.len());
-        for (r, (f, s)) in finals.iter().zip(&srows).enumerate() {
+        for (r, (f, s)) in finals.iter().zip(&s_rows).enumerate() {
             let mut pts: Vec<P3> = f
                 .iter()
                 .zip(s)
-                .map(|(f, s)| [f[0], f[1], f[2].max(s[2] - doc)])
+                .map(|(f, s)| [f[0], f[1], f[2].max(s.min(0.0) - doc)])
                 .collect();
-            let mut cut: Vec<bool> = f.iter().zip(s).map(|(f, s)| s[2] > f[2] + 1e-6).collect();
+            let mut cut: Vec<bool> = f.iter().zip(s).map(|(f, s)| over(f, *s) > doc + 1e-6).collect();
             if r % 2 == 1 {
                 pts.reverse();
                 cut.reverse();
@@ -456,24 +521,38 @@ fn intermediate_levels(
             pitch_mm: design.hf.pitch_mm,
             tol_mm: tol,
         };
-        let link = |a: P3, e: P3| {
-            link_points(design, dc, a, e, |z| z)
-                .into_iter()
-                .map(|p| {
-                    let (u, v) = design.to_uv(p[0], p[1]);
-                    let s = sdc.point(u - design.u0, v - design.v0).min(0.0);
-                    [p[0], p[1], p[2].max(s - doc)]
-                })
-                .collect()
-        };
         let (m0, at0) = (b.moves.len(), b.at);
-        rough::emit_level(b, &lv, &link);
-        let cut_now = stock_left(design, &b.moves[m0..], at0, dc.cutter());
-        stock
-            .z_mm
-            .iter_mut()
-            .zip(&cut_now.z_mm)
-            .for_each(|(a, c)| *a = a.min(*c));
+        {
+            let sdc = dropcutter::DropCutter::new(stock, cutter, dropcutter::Edge::Open);
+            let link = |a: P3, e: P3| {
+                link_points(design, dc, a, e, |z| z)
+                    .into_iter()
+                    .map(|p| {
+                        let (u, v) = design.to_uv(p[0], p[1]);
+                        let s = sdc.point(u - design.u0, v - design.v0).min(0.0);
+                        [p[0], p[1], p[2].max(s - doc)]
+                    })
+                    .collect()
+            };
+            rough::emit_level(b, &lv, &link);
+        }
+        let cut_now = stock_left(design, &b.moves[m0..], at0, cutter);
+        let nb = stock.nx.div_ceil(CHANGE_BLOCK);
+        let mut changed = vec![false; nb * stock.ny];
+        for (k, (a, c)) in stock.z_mm.iter_mut().zip(&cut_now.z_mm).enumerate() {
+            if *c < *a {
+                *a = *c;
+                changed[(k / stock.nx) * nb + (k % stock.nx) / CHANGE_BLOCK] = true;
+            }
+        }
+        stock_cl_rows(
+            design,
+            &dropcutter::DropCutter::new(stock, cutter, dropcutter::Edge::Open),
+            vs,
+            &cols,
+            &mut s_rows,
+            Some(&changed),
+        );
         levels += 1;
     }
 }
@@ -552,7 +631,12 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
     if let Some(rp) = rp.as_ref().filter(|p| p.layers > 0) {
         b.start_tool(rough, rough_cut);
         tool_changes += 1;
-        let link = |a: P3, e: P3, zl: f64| link_points(&design, &rdc, a, e, |z| (z + leave).max(zl));
+        let memo = LinkMemo {
+            design: &design,
+            dc: &rdc,
+            seen: Default::default(),
+        };
+        let link = |a: P3, e: P3, zl: f64| memo.points(a, e, |z| (z + leave).max(zl));
         rough::emit(
             &mut b,
             rp,
@@ -727,7 +811,8 @@ fn header(f: &HeaderFacts) -> Vec<String> {
 }
 
 /// Points along the straight link from `a` to `b` every pitch, at the CL surface mapped by `zmap`, ending at
-/// `b` (whose z is already right).
+/// `b` (whose z is already right). The CL heights are direct summations (in parallel: links are emitted one
+/// after another).
 fn link_points(
     design: &raster::RotatedDesign,
     dc: &dropcutter::DropCutter,
@@ -735,18 +820,44 @@ fn link_points(
     b: P3,
     zmap: impl Fn(f64) -> f64,
 ) -> Vec<P3> {
+    let mut pts = vec![a];
+    pts.extend(link_cl(design, dc, a, b).into_iter().map(|p| [p[0], p[1], zmap(p[2])]));
+    pts.push(b);
+    pts
+}
+
+/// The interior points of the link from `a` to `b` every pitch, at the CL surface.
+fn link_cl(design: &raster::RotatedDesign, dc: &dropcutter::DropCutter, a: P3, b: P3) -> Vec<P3> {
     let d = ((b[0] - a[0]).powi(2) + (b[1] - a[1]).powi(2)).sqrt();
     let n = (d / design.hf.pitch_mm).ceil().max(1.0) as usize;
-    let mut pts: Vec<P3> = (1..n)
+    (1..n)
+        .into_par_iter()
         .map(|k| {
             let t = k as f64 / n as f64;
             let (x, y) = (a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1]));
-            [x, y, zmap(design.cl_at(dc, x, y))]
+            [x, y, design.cl_at(dc, x, y)]
         })
-        .collect();
-    pts.insert(0, a);
-    pts.push(b);
-    pts
+        .collect()
+}
+
+/// [`link_points`] remembering each link's CL points by its ends' `(x, y)`: the roughing layers link the
+/// same pass ends again and again, only their `zmap` (the layer) differs.
+struct LinkMemo<'a> {
+    design: &'a raster::RotatedDesign,
+    dc: &'a dropcutter::DropCutter<'a>,
+    seen: std::cell::RefCell<std::collections::HashMap<[u64; 4], Vec<P3>>>,
+}
+
+impl LinkMemo<'_> {
+    fn points(&self, a: P3, b: P3, zmap: impl Fn(f64) -> f64) -> Vec<P3> {
+        let key = [a[0].to_bits(), a[1].to_bits(), b[0].to_bits(), b[1].to_bits()];
+        let mut seen = self.seen.borrow_mut();
+        let cl = seen.entry(key).or_insert_with(|| link_cl(self.design, self.dc, a, b));
+        let mut pts = vec![a];
+        pts.extend(cl.iter().map(|p| [p[0], p[1], zmap(p[2])]));
+        pts.push(b);
+        pts
+    }
 }
 
 /// `h:mm:ss`.

@@ -109,13 +109,32 @@ impl RotatedDesign {
     pub fn pass(&self, dc: &DropCutter, v: f64, zmap: impl Fn(f64) -> f64) -> Vec<P3> {
         let mut row = vec![0.0; self.hf.nx];
         dc.row(v - self.v0, &mut row);
+        let cols = self.pass_columns(v);
+        self.pass_points(v, cols.start, &row[cols], zmap)
+    }
+
+    /// The grid columns of a pass at `v` whose points lie inside the area (one interval: a line meets the
+    /// rectangle in one segment).
+    pub fn pass_columns(&self, v: f64) -> std::ops::Range<usize> {
         let p = self.hf.pitch_mm;
-        row.iter()
+        let inside = |i: usize| {
+            let (x, y) = self.to_xy(self.u0 + (i as f64 + 0.5) * p, v);
+            self.inside(x, y)
+        };
+        match (0..self.hf.nx).position(inside) {
+            Some(a) => a..(a + (a..self.hf.nx).take_while(|&i| inside(i)).count()),
+            None => 0..0,
+        }
+    }
+
+    /// The points of a pass at `v` over the columns `i0 .. i0 + z.len()`, with tip heights `z` mapped by `zmap`.
+    pub fn pass_points(&self, v: f64, i0: usize, z: &[f64], zmap: impl Fn(f64) -> f64) -> Vec<P3> {
+        let p = self.hf.pitch_mm;
+        z.iter()
             .enumerate()
-            .filter_map(|(i, z)| {
-                let u = self.u0 + (i as f64 + 0.5) * p;
-                let (x, y) = self.to_xy(u, v);
-                self.inside(x, y).then(|| [x, y, zmap(*z)])
+            .map(|(k, z)| {
+                let (x, y) = self.to_xy(self.u0 + ((i0 + k) as f64 + 0.5) * p, v);
+                [x, y, zmap(*z)]
             })
             .collect()
     }
