@@ -56,7 +56,7 @@ fn simulate_writes_its_files_and_figures() {
 fn refusals_name_file_line_and_column_and_write_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let prog = dir.path().join("bad.ngc");
-    std::fs::write(&prog, "G21\nG0 X0 Y0 Z1\nG1 Z-0.1 F100\n  G18 G2 X1 I0.5\n").unwrap();
+    std::fs::write(&prog, "G21\nG0 X0 Y0 Z1\nG1 Z-0.1 F100\n  G28 X1\n").unwrap();
     let out = dir.path().join("sim");
     let o = brdfmill(&[
         "simulate",

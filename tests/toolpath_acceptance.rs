@@ -98,14 +98,33 @@ fn default_job_covers_the_area_without_gouging() {
         assert!(ymin.abs() < 1e-9 && (ymax - 40.0).abs() < 1e-9, "y {ymin}..{ymax}");
         // scallop target met and no gouge at any emitted CL point
         assert!(s.scallop_um <= 1.0 + 1e-9);
-        assert!(s.max_gouge_um <= 1e-6, "gouge {} µm", s.max_gouge_um);
+        // the check reads the written points, arcs along their length: between the design's samples the
+        // discrete CL of a ball may stand above a chord or an arc through CL samples by a cap's sag,
+        // p²/(8r)·(1 + s²)^{3/2}, s the tile's steepest slope (the vertices themselves are exact)
+        let t = tile();
+        let steepest = (0..t.ny)
+            .flat_map(|j| (0..t.nx).map(move |i| (i, j)))
+            .map(|(i, j)| {
+                let dx = t.at((i + 1) % t.nx, j) - t.at(i, j);
+                let dy = t.at(i, (j + 1) % t.ny) - t.at(i, j);
+                dx.abs().max(dy.abs()) / pitch
+            })
+            .fold(0.0, f64::max);
+        let sag_um = 1000.0 * pitch * pitch / (8.0 * 0.5) * (1.0 + steepest * steepest).powf(1.5);
+        assert!(
+            s.max_gouge_um <= sag_um,
+            "gouge {} µm, above {sag_um} µm",
+            s.max_gouge_um
+        );
         assert!(s.checked_points >= 40_000);
         // the design is deeper than one cut: roughing layers exist
         assert!(s.roughing_layers >= 1);
         assert!(
             p.gcode.contains("G17 G21 G40 G49 G54 G80 G90 G94") && p.gcode.contains("M3 S") && p.gcode.contains("G4 P")
         );
-        assert!(p.gcode.trim_end().ends_with("M5\nM30") || p.gcode.trim_end().ends_with("M9\nM30"));
+        // the end: spindle (and coolant) off, the XY plane back if arcs left it elsewhere, program end
+        let end = p.gcode.trim_end().replace("\nG17\nM30", "\nM30");
+        assert!(end.ends_with("M5\nM30") || end.ends_with("M9\nM30"));
         // the spindle starts only after the first retract
         let first_m3 = p.gcode.find("M3 S").unwrap();
         assert!(p.gcode[..first_m3].contains("G0 Z"), "spindle on before the retract");
@@ -404,11 +423,7 @@ fn every_profile_and_tile_cuts_within_the_design_and_each_tools_depth_of_cut() {
                     rough_cut + rough_air,
                     rough_vertical
                 );
-                // the bar is for the pocket tiles; the relief that reaches the area's edges is there
-                // to make entries start in material, and its air is reported, not held to it
-                if name != "edge" {
-                    assert!(air < 0.10, "{name} {profile}: roughing air {:.1}%", 100.0 * air);
-                }
+                assert!(air < 0.10, "{name} {profile}: roughing air {:.1}%", 100.0 * air);
             }
             println!(
                 "{name} {profile}: {} entries ramped, {} plunged",

@@ -44,6 +44,9 @@ pub struct Args {
     /// Cutting feed override (mm/min); default: the tool's cutting data
     #[arg(long)]
     pub feed_mm_min: Option<f64>,
+    /// Write the finishing passes as straight blocks only (no G2/G3 arcs in the pass plane)
+    #[arg(long)]
+    pub no_arcs: bool,
     /// Output G-code file
     #[arg(long)]
     pub out: PathBuf,
@@ -75,6 +78,7 @@ pub fn config(a: &Args) -> Result<ToolpathConfig> {
         tolerance_um: a.tolerance_um,
         feed_mm_min: a.feed_mm_min.unwrap_or(0.0),
         job: format!("tile {}", a.tile.display()),
+        arcs: !a.no_arcs,
     })
 }
 
@@ -99,7 +103,10 @@ pub fn run(a: &Args) -> Result<()> {
             s.roughing_layers, s.roughing_tool, s.tool_changes
         );
     }
-    println!("lines     {} ({} motion blocks)", s.lines, s.blocks);
+    println!(
+        "lines     {} ({} motion blocks, {} of them G2/G3 arcs in the pass plane)",
+        s.lines, s.blocks, s.arc_blocks
+    );
     let limit = s
         .max_blocks_s
         .map_or("no limit".to_string(), |r| format!("limit {r} blocks/s"));

@@ -24,6 +24,11 @@
 //! a Z re-touch. `brdfmill simulate` reads `T<n> M0` on one line as that manual change. One file with pauses keeps the work
 //! coordinates and the program's order in one place; see `machines/README.md`.
 //!
+//! **Arcs** ([`Move::Arc`]). `G2`/`G3` with the plane word (`G18`, `G19`) written when it changes and
+//! `G17` restored before `M30`; the end point and the centre come on the resolution already (the fitter
+//! quantises with [`quantize`], the rounding written here, and checks the arc as it will be drawn), and the
+//! centre is written as the in-plane offsets `I J K` from the position the previous block left.
+//!
 //! **End.** The move list ends with the retract, park, `M5` and `M9`; the writer closes with `M30`.
 //!
 //! **Comments.** Text reaches the program only through [`comment_text`]: control characters become spaces
@@ -31,7 +36,7 @@
 //! `;` → `,`, common non-ASCII letters are spelled out (α → alpha, µ → u, ° → deg, × → x) and any other
 //! becomes `?`, so a header line is one comment of at most 78 characters on both controllers.
 
-use super::moves::{Coolant, Move, P3};
+use super::moves::{Arc, Coolant, Move, Plane, P3};
 use super::Dialect;
 use std::fmt::Write;
 
@@ -116,6 +121,8 @@ struct Modal {
     /// Decimals and resolution of coordinates.
     decimals: usize,
     resolution_mm: f64,
+    /// The arc plane, when not `G17`.
+    plane: Option<Plane>,
 }
 
 /// The modal safety line written before any motion.
@@ -174,7 +181,11 @@ pub fn emit(setup: &Setup, moves: &[Move]) -> String {
                 diameter_mm,
                 kind,
             } => tool_change(&mut out, &mut m, setup.dialect, number, diameter_mm, kind),
+            Move::Arc(a) => arc(&mut out, &mut m, &a),
         }
+    }
+    if m.plane.is_some() {
+        let _ = writeln!(out, "G17");
     }
     let _ = writeln!(out, "M30");
     out
@@ -219,15 +230,64 @@ fn tool_change(out: &mut String, m: &mut Modal, dialect: Dialect, number: u32, d
     m.feed = None;
 }
 
-/// A coordinate on the machine's resolution: X/Y to the nearest step, Z up to the next (never below).
-fn coord(m: &Modal, axis: usize, v: f64) -> String {
-    let q = m.resolution_mm;
+/// A coordinate on the machine's resolution `q`: X/Y to the nearest step, Z up to the next (never below).
+pub fn quantize(v: f64, axis: usize, q: f64) -> f64 {
     let steps = if axis == 2 {
         (v / q - 1e-6).ceil()
     } else {
         (v / q).round()
     };
-    num(steps * q, m.decimals)
+    steps * q
+}
+
+/// [`quantize`], written.
+fn coord(m: &Modal, axis: usize, v: f64) -> String {
+    num(quantize(v, axis, m.resolution_mm), m.decimals)
+}
+
+/// A `G2`/`G3` block (see the module documentation). The position is known here: arcs only continue a
+/// cut; were it not, the arc is written as feeds along its chords from the arc's start.
+fn arc(out: &mut String, m: &mut Modal, a: &Arc) {
+    let known: Option<Option<P3>> = m.known.then(|| {
+        let v = |k: usize| m.xyz[k].as_deref().and_then(|s| s.parse().ok());
+        match (v(0), v(1), v(2)) {
+            (Some(x), Some(y), Some(z)) => Some([x, y, z]),
+            _ => None,
+        }
+    });
+    let Some(Some(from)) = known else {
+        debug_assert!(false, "an arc with no known start");
+        return motion(out, m, 1, a.to, Some(a.feed_mm_min));
+    };
+    let mut line = String::new();
+    if m.plane.unwrap_or(Plane::Xy) != a.plane {
+        let _ = write!(line, "G{} ", a.plane.g());
+        m.plane = (a.plane != Plane::Xy).then_some(a.plane);
+    }
+    let g = if a.cw { 2 } else { 3 };
+    line.push_str(if g == 2 { "G2" } else { "G3" });
+    m.motion = Some(g);
+    for (k, axis) in ['X', 'Y', 'Z'].iter().enumerate() {
+        let s = coord(m, k, a.to[k]);
+        if m.xyz[k].as_deref() != Some(&s) {
+            let _ = write!(line, " {axis}{s}");
+            m.xyz[k] = Some(s);
+        }
+    }
+    let (p, q, _) = a.plane.axes();
+    let mut offs = [(p, a.center[p] - from[p]), (q, a.center[q] - from[q])];
+    offs.sort_by_key(|o| o.0);
+    for (k, d) in offs {
+        let steps = (d / m.resolution_mm).round() * m.resolution_mm;
+        let _ = write!(line, " {}{}", ['I', 'J', 'K'][k], num(steps, m.decimals));
+    }
+    let f = num(a.feed_mm_min, 1);
+    if m.feed.as_deref() != Some(&f) {
+        let _ = write!(line, " F{f}");
+        m.feed = Some(f);
+    }
+    out.push_str(&line);
+    out.push('\n');
 }
 
 fn motion(out: &mut String, m: &mut Modal, g: u8, p: P3, feed: Option<f64>) {

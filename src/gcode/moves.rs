@@ -34,6 +34,143 @@ pub enum Move {
     },
     /// Coolant on (`M7` mist, `M8` flood) or off (`M9`).
     Coolant(Coolant),
+    /// `G2`/`G3` at a feed (mm/min): a circular arc in `plane` from the tool's position to `to` about
+    /// `center` (whose off-plane coordinate is ignored), `cw` when clockwise as the standard has it
+    /// ([`Arc::ccw_in_plane`]), less than half a turn. Both points lie on the machine's resolution, so the
+    /// emitter writes them unrounded.
+    Arc(Arc),
+}
+
+/// The plane of an arc: its two in-plane axes, in the order G-code names them (`G17` X→Y, `G18` Z→X,
+/// `G19` Y→Z).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+pub enum Plane {
+    /// `G17`.
+    Xy,
+    /// `G18`.
+    Zx,
+    /// `G19`.
+    Yz,
+}
+
+impl Plane {
+    /// The in-plane axes `(first, second)` and the axis normal to the plane.
+    pub fn axes(self) -> (usize, usize, usize) {
+        match self {
+            Plane::Xy => (0, 1, 2),
+            Plane::Zx => (2, 0, 1),
+            Plane::Yz => (1, 2, 0),
+        }
+    }
+
+    /// The G word selecting it.
+    pub fn g(self) -> u8 {
+        match self {
+            Plane::Xy => 17,
+            Plane::Zx => 18,
+            Plane::Yz => 19,
+        }
+    }
+}
+
+/// A `G2`/`G3` arc (see [`Move::Arc`]).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Arc {
+    /// End point, mm.
+    pub to: P3,
+    /// Centre, mm.
+    pub center: P3,
+    /// Plane.
+    pub plane: Plane,
+    /// `G2` (clockwise seen from the positive end of the plane's normal axis) rather than `G3`.
+    pub cw: bool,
+    /// Feed, mm/min.
+    pub feed_mm_min: f64,
+}
+
+impl Arc {
+    /// The arc from `from` to `to` about `center` in `plane`, turning counter-clockwise in the plane's
+    /// (first, second) axes when `ccw`: `G3` is counter-clockwise in those axes for all three planes (for
+    /// `G18` that is (Z, X), which is clockwise with X drawn right and Z up).
+    pub fn ccw_in_plane(to: P3, center: P3, plane: Plane, ccw: bool, feed_mm_min: f64) -> Arc {
+        Arc {
+            to,
+            center,
+            plane,
+            cw: !ccw,
+            feed_mm_min,
+        }
+    }
+
+    /// Points along the arc from `from`, chords at most `tol_mm` from it, ending exactly at `to`. The radius
+    /// is that of `from` (as a controller draws it); the helical coordinate (normal to the plane) moves
+    /// linearly.
+    pub fn points(&self, from: P3, tol_mm: f64) -> Vec<P3> {
+        let (a, b, n) = self.plane.axes();
+        let (c0, c1) = (self.center[a], self.center[b]);
+        let (u0, v0) = (from[a] - c0, from[b] - c1);
+        let (u1, v1) = (self.to[a] - c0, self.to[b] - c1);
+        let r = u0.hypot(v0);
+        let (t0, mut t1) = (v0.atan2(u0), v1.atan2(u1));
+        if self.cw {
+            while t1 >= t0 {
+                t1 -= std::f64::consts::TAU;
+            }
+        } else {
+            while t1 <= t0 {
+                t1 += std::f64::consts::TAU;
+            }
+        }
+        // chord of angle φ misses the arc by r(1 − cos(φ/2))
+        let step = if r > tol_mm && tol_mm > 0.0 {
+            2.0 * (1.0 - tol_mm / r).acos()
+        } else {
+            std::f64::consts::FRAC_PI_4
+        };
+        let k = ((t1 - t0).abs() / step.max(1e-6)).ceil().clamp(1.0, 1e5) as usize;
+        let mut out = Vec::with_capacity(k);
+        for i in 1..k {
+            let t = t0 + (t1 - t0) * i as f64 / k as f64;
+            let mut p = [0.0; 3];
+            p[a] = c0 + r * t.cos();
+            p[b] = c1 + r * t.sin();
+            p[n] = from[n] + (self.to[n] - from[n]) * i as f64 / k as f64;
+            out.push(p);
+        }
+        out.push(self.to);
+        out
+    }
+}
+
+/// Chord tolerance at which [`expand_arcs`] replaces arcs, mm (0.1 µm).
+pub const CHORD_TOL_MM: f64 = 1e-4;
+
+/// The moves with every arc replaced by feed moves along its chords ([`CHORD_TOL_MM`]): what the checks,
+/// lengths and extents read.
+pub fn expand_arcs(moves: &[Move], start: P3) -> std::borrow::Cow<'_, [Move]> {
+    if !moves.iter().any(|m| matches!(m, Move::Arc(_))) {
+        return std::borrow::Cow::Borrowed(moves);
+    }
+    let mut out = Vec::with_capacity(moves.len() * 2);
+    let mut at = start;
+    for m in moves {
+        match *m {
+            Move::Arc(arc) => {
+                out.extend(
+                    arc.points(at, CHORD_TOL_MM)
+                        .into_iter()
+                        .map(|p| Move::Feed(p, arc.feed_mm_min)),
+                );
+                at = arc.to;
+            }
+            Move::Rapid(p) | Move::Feed(p, _) => {
+                out.push(*m);
+                at = p;
+            }
+            _ => out.push(*m),
+        }
+    }
+    std::borrow::Cow::Owned(out)
 }
 
 /// Coolant commands.
@@ -61,7 +198,7 @@ pub struct Lengths {
 pub fn lengths(moves: &[Move], start: P3) -> Lengths {
     let mut at = start;
     let mut l = Lengths::default();
-    for m in moves {
+    for m in expand_arcs(moves, start).iter() {
         match *m {
             Move::Rapid(p) => {
                 l.rapid_mm += dist(at, p);
@@ -83,11 +220,11 @@ pub fn dist(a: P3, b: P3) -> f64 {
     ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
 }
 
-/// Bounding box `(min, max)` of all motion end points (and `start`).
+/// Bounding box `(min, max)` of all motion end points (and `start`), arcs by their chords' ends.
 pub fn bounds(moves: &[Move], start: P3) -> (P3, P3) {
     let mut lo = start;
     let mut hi = start;
-    for m in moves {
+    for m in expand_arcs(moves, start).iter() {
         if let Move::Rapid(p) | Move::Feed(p, _) = m {
             for k in 0..3 {
                 lo[k] = lo[k].min(p[k]);

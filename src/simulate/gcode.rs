@@ -8,9 +8,9 @@
 //!
 //! | word | meaning |
 //! | --- | --- |
-//! | `G0 G1 G2 G3` | rapid, feed, clockwise / counter-clockwise arc (G17 plane; `I J` or `R` form; `P` full turns) |
+//! | `G0 G1 G2 G3` | rapid, feed, clockwise / counter-clockwise arc (in the plane of `G17`, `G18` or `G19`; `I J`, `K I`, `J K` or `R` form; `P` full turns) |
 //! | `G4 P` | dwell, seconds |
-//! | `G17` | XY plane (`G18`, `G19` are refused: arcs in other planes are not simulated yet) |
+//! | `G17 G18 G19` | arc plane XY, ZX, YZ (clockwise as seen from the positive end of Z, Y, X) |
 //! | `G20 G21` | inch / mm; everything is converted to mm on reading |
 //! | `G90 G91`, `G90.1 G91.1` | absolute / incremental X Y Z, and arc centres (default `G91.1`, relative to the start) |
 //! | `G40 G49 G54 G61 G61.1 G64 [P Q] G80 G94` | states the simulation is already in, or path blending, which the simulation does not model: it follows the programmed path exactly |
@@ -19,9 +19,9 @@
 //! | `T`, `M6` | tool select and change (`T… M0` on one line is a manual change, as GRBL has no `M6`; a `T` before the first move is the mounted tool): every later segment carries the tool's number ([`Segment::tool`]), so the simulation sweeps each tool with its own shape |
 //! | `G43 H` | tool length offset from the table: the simulation works in tip coordinates and takes the offset as measured; an `H` other than the tool in the spindle is refused (the classic crash) |
 //! | `F` | feed, units per minute (`G94`) |
-//! | `X Y Z I J R` | coordinates, arc centre offsets, arc radius (negative: the long way round) |
+//! | `X Y Z I J K R` | coordinates, arc centre offsets (the two of the plane), arc radius (negative: the long way round) |
 //!
-//! Anything else — other G and M codes, `A B C U V W` axes, `K` (arcs only in G17), `#` parameters, `[ ]`
+//! Anything else — other G and M codes, `A B C U V W` axes, an arc offset normal to its plane (`K` in G17), `#` parameters, `[ ]`
 //! expressions, `O` words, block delete `/`, two words of one modal group or two of one letter on a line, a feed
 //! move without a feed rate, an arc whose end radius differs from its start radius by more than max(0.002 mm,
 //! 0.1%) — is an error.
@@ -131,7 +131,7 @@ fn g_group(t: i64) -> Result<u8, String> {
     Ok(match t {
         0 | 10 | 20 | 30 | 800 => 1,
         40 => 0,
-        170 => 2,
+        170 | 180 | 190 => 2,
         200 | 210 => 6,
         900 | 910 => 3,
         901 | 911 => 4,
@@ -140,7 +140,6 @@ fn g_group(t: i64) -> Result<u8, String> {
         490 => 8,
         540 => 12,
         610 | 611 | 640 => 13,
-        180 | 190 => return Err("only the XY plane (G17) is supported".into()),
         280 | 281 | 300 | 301 => return Err("home positions (G28/G30) are machine-specific and not simulated".into()),
         410 | 411 | 420 | 421 => return Err("cutter radius compensation is not supported".into()),
         430 => 8,
@@ -152,7 +151,7 @@ fn g_group(t: i64) -> Result<u8, String> {
         930 | 950 => return Err("only units-per-minute feed (G94) is supported".into()),
         _ => {
             return Err(format!(
-                "{} is not supported (understood: G0 G1 G2 G3 G4 G17 G20 G21 G40 G43 G49 G54 G61 G61.1 G64 G80 G90 \
+                "{} is not supported (understood: G0 G1 G2 G3 G4 G17 G18 G19 G20 G21 G40 G43 G49 G54 G61 G61.1 G64 G80 G90 \
                  G90.1 G91 G91.1 G94)",
                 gname(t)
             ))
@@ -319,14 +318,13 @@ fn sort_words(w: &[Word], lineno: usize) -> Result<Words, GcodeError> {
                     return Err(err(wd.column, "a line number `N` must come first on the line".into()));
                 }
             }
-            'X' | 'Y' | 'Z' | 'I' | 'J' | 'R' | 'F' | 'S' | 'P' | 'Q' | 'T' | 'H' => {
+            'X' | 'Y' | 'Z' | 'I' | 'J' | 'K' | 'R' | 'F' | 'S' | 'P' | 'Q' | 'T' | 'H' => {
                 let slot = &mut out.val[(wd.letter as u8 - b'A') as usize];
                 if slot.is_some() {
                     return Err(err(wd.column, format!("`{}` appears twice on this line", wd.letter)));
                 }
                 *slot = Some((wd.value, wd.column));
             }
-            'K' => return Err(err(wd.column, "`K` is not used by G17 arcs (XY plane only)".into())),
             'A' | 'B' | 'C' | 'U' | 'V' | 'W' => {
                 return Err(err(
                     wd.column,
@@ -452,6 +450,9 @@ fn modes(w: &Words, st: &mut State, prog: &mut Motion) {
                 prog.inch = true;
             }
             210 => m.units = Units::Mm,
+            170 => m.plane = 17,
+            180 => m.plane = 18,
+            190 => m.plane = 19,
             900 => m.distance = Distance::Absolute,
             910 => m.distance = Distance::Incremental,
             901 => m.arc_distance = Distance::Absolute,
@@ -472,7 +473,7 @@ fn motion(w: &Words, lineno: usize, st: &mut State, prog: &mut Motion, opt: &Par
         }
     }
     let axis_col = ['X', 'Y', 'Z'].iter().filter_map(|l| w.get(*l).map(|v| v.1)).min();
-    let arc_col = ['I', 'J', 'R'].iter().filter_map(|l| w.get(*l).map(|v| v.1)).min();
+    let arc_col = ['I', 'J', 'K', 'R'].iter().filter_map(|l| w.get(*l).map(|v| v.1)).min();
     if axis_col.is_none() && arc_col.is_none() {
         return Ok(());
     }
@@ -486,7 +487,7 @@ fn motion(w: &Words, lineno: usize, st: &mut State, prog: &mut Motion, opt: &Par
     }
     if !motion.is_arc() {
         if let Some(c) = arc_col {
-            return Err(err(c, "`I`, `J` or `R` without an arc (G2/G3)".into()));
+            return Err(err(c, "`I`, `J`, `K` or `R` without an arc (G2/G3)".into()));
         }
     }
     let u = st.modal.units.mm();
@@ -556,8 +557,10 @@ fn push_line(prog: &mut Motion, tool: u32, from: P3, to: P3, kind: SegmentKind, 
     });
 }
 
-/// Linearise a G2 (`cw`) / G3 arc in the XY plane from the current position to `target` into chords of
-/// sagitta ≤ the tolerance. The radius varies linearly from start to end (LinuxCNC accepts a small
+/// Linearise a G2 (`cw`) / G3 arc in the current plane (G17 X→Y with `I J`, G18 Z→X with `K I`, G19 Y→Z
+/// with `J K`; clockwise seen from the positive end of the normal axis, so counter-clockwise for G3 in the
+/// plane's own (first, second) axes) from the current position to `target` into chords of sagitta ≤ the
+/// tolerance. The radius varies linearly from start to end (LinuxCNC accepts a small
 /// difference); z varies linearly with the angle (a helix). Errors carry (0-based column, message).
 #[allow(clippy::too_many_arguments)]
 fn arc(
@@ -572,8 +575,42 @@ fn arc(
 ) -> Result<(), (usize, String)> {
     use std::f64::consts::TAU;
     let u = st.modal.units.mm();
-    let [x0, y0, z0] = st.pos;
-    let [x1, y1, z1] = target;
+    // the plane's (first, second, normal) axes and their letters; below, x/y/z and I/J name them
+    let (fa, sa, na) = match st.modal.plane {
+        18 => (2, 0, 1),
+        19 => (1, 2, 0),
+        _ => (0, 1, 2),
+    };
+    let (axis, off) = (['X', 'Y', 'Z'], ['I', 'J', 'K']);
+    let normal_offset = off[na];
+    if let Some((_, c)) = get(normal_offset) {
+        return Err((
+            c,
+            format!(
+                "`{normal_offset}` is not an offset in the G{} plane",
+                st.modal.plane.max(17)
+            ),
+        ));
+    }
+    let get = |l: char| -> Option<(f64, usize)> {
+        get(match l {
+            'X' => axis[fa],
+            'Y' => axis[sa],
+            'I' => off[fa],
+            'J' => off[sa],
+            other => other,
+        })
+    };
+    let (pos, tgt) = (st.pos, target);
+    let [x0, y0, z0] = [pos[fa], pos[sa], pos[na]];
+    let [x1, y1, z1] = [tgt[fa], tgt[sa], tgt[na]];
+    let world = |p: [f64; 3]| {
+        let mut w = [0.0; 3];
+        w[fa] = p[0];
+        w[sa] = p[1];
+        w[na] = p[2];
+        w
+    };
     let turns = match get('P') {
         None => 0,
         Some((p, c)) => {
@@ -673,7 +710,7 @@ fn arc(
             let f = k as f64 / n as f64;
             let a = a0 + dir * sweep * f;
             let rr = r0 + (r1 - r0) * f;
-            [cx + rr * a.cos(), cy + rr * a.sin(), z0 + (z1 - z0) * f]
+            world([cx + rr * a.cos(), cy + rr * a.sin(), z0 + (z1 - z0) * f])
         };
         push_line(prog, st.tool, at, p, SegmentKind::Arc, lineno, st.modal.feed_mm_min);
         at = p;
@@ -711,10 +748,39 @@ mod tests {
     }
 
     #[test]
+    fn arcs_in_the_zx_and_yz_planes() {
+        // G18 G2 from (0,0,0) to (2,0,0) about (1,0,0): clockwise seen from +Y, counter-clockwise with X
+        // drawn right and Z up: under the chord (a cup), through z = -1 at x = 1
+        let g = p("G1 X0 Y0 Z0 F100\nG18 G2 X2 Z0 I1 K0\n").unwrap();
+        let mid = g
+            .segments
+            .iter()
+            .map(|s| s.to)
+            .min_by(|a, b| a[2].total_cmp(&b[2]))
+            .unwrap();
+        assert!(
+            (mid[0] - 1.0).abs() < 1e-3 && (mid[2] + 1.0).abs() < 1e-6 && mid[1] == 0.0,
+            "{mid:?}"
+        );
+        // G3 the other way: over the chord
+        let g = p("G1 X0 Y0 Z0 F100\nG18 G3 X2 Z0 I1 K0\n").unwrap();
+        assert!(g.segments.iter().all(|s| s.to[2] >= -1e-12) && g.segments.iter().any(|s| s.to[2] > 0.99));
+        // G19 G2 from (0,0,0) to (0,2,0) about (0,1,0): clockwise seen from +X, Y right and Z up: over the chord
+        let g = p("G1 X0 Y0 Z0 F100\nG19 G2 Y2 Z0 J1 K0\n").unwrap();
+        assert!(g.segments.iter().all(|s| s.to[2] >= -1e-12 && s.to[0] == 0.0));
+        assert!(g.segments.iter().any(|s| s.to[2] > 0.99));
+    }
+
+    #[test]
     fn refusals_carry_line_and_column() {
         for (text, line, col, what) in [
             ("G0 X1\nG1 X2\n", 2, 1, "feed"),
-            ("G0 X1\n  G18\n", 2, 3, "XY plane"),
+            (
+                "G0 X1\nG18 G2 X2 Z0 I0.5 J0 F9\n",
+                2,
+                19,
+                "not an offset in the G18 plane",
+            ),
             ("G0 X1 A3\n", 1, 7, "axis"),
             ("#1 = 2\n", 1, 1, "parameters"),
             ("G1 X[1+2] F1\n", 1, 5, "parameter or expression"),

@@ -186,6 +186,9 @@ impl Sweep {
         let (dx, dy, dz, az, r, r2) = (self.dx, self.dy, self.dz, self.az, self.r, self.r2);
         let (inv_l2, inv_l, c1) = (self.inv_l2, self.inv_l, self.c1);
         let (ey2, eyd) = (ey * ey, ey * dy);
+        // cells on the rim count as covered, within the drop-cutter's relative 1e-12 (`toolpath::dropcutter`):
+        // the two must agree there, or a tip the drop-cutter holds up by a rim cell never lowers that cell
+        let rim = r2 * 1e-12;
         let mut hits = 0;
         let mut lowered = false;
         match self.bit {
@@ -200,7 +203,7 @@ impl Sweep {
                     let (fx, fy) = (ex - t * dx, ey - t * dy);
                     let s = r2 - (fx * fx + fy * fy);
                     let z = az + t * dz + r - s.max(0.0).sqrt();
-                    let inside = rp2 >= 0.0 && s >= 0.0;
+                    let inside = rp2 >= -rim && s >= -rim;
                     hits += inside as usize;
                     lowered |= inside && z < *cell - LOWERED_MM;
                     if inside && z < *cell {
@@ -216,7 +219,7 @@ impl Sweep {
                     let rp2 = r2 - (ex * ex + ey2 - ed * tp);
                     let w = rp2.max(0.0).sqrt() * inv_l;
                     let t = (tp - w).max(0.0);
-                    let inside = rp2 >= 0.0 && t <= (tp + w).min(1.0);
+                    let inside = rp2 >= -rim && t <= (tp + w).min(1.0);
                     let z = az + t * dz;
                     hits += inside as usize;
                     lowered |= inside && z < *cell - LOWERED_MM;

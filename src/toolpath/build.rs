@@ -144,6 +144,19 @@ impl<'m> Builder<'m> {
         self.ramped_entries += 1;
     }
 
+    /// An arc at feed `f`, capped like [`Self::feed`] at its steepest point (an arc under a half turn with no
+    /// vertical tangent is steepest at an end, where `|dz/ds| = |h − c_h| / r`), whether it rises or falls.
+    pub fn arc(&mut self, mut a: moves::Arc, f: f64) {
+        let (p, q, _) = a.plane.axes();
+        let h = if p == 2 { q } else { p };
+        let r = (self.at[p] - a.center[p]).hypot(self.at[q] - a.center[q]);
+        let steep = ((self.at[h] - a.center[h]).abs().max((a.to[h] - a.center[h]).abs()) / r).min(1.0);
+        let zcap = self.machine.limits.max_feed_z_mm_min.min(self.plunge_mm_min);
+        a.feed_mm_min = if f * steep > zcap { zcap / steep } else { f };
+        self.moves.push(Move::Arc(a));
+        self.at = a.to;
+    }
+
     /// Feed along `pts` at `f`.
     pub fn path(&mut self, pts: &[P3], f: f64) {
         for p in pts {

@@ -2,13 +2,15 @@
 //! profile and the tool. A violation names the limit, its value and the offending value.
 
 use super::machine::{Machine, Tool};
-use crate::gcode::moves::{bounds, Move, P3};
+use crate::gcode::moves::{bounds, expand_arcs, Move, P3};
 
 /// Clearance above the stock top (z = 0) below which a rapid may not go, mm.
 pub const RAPID_FLOOR_MM: f64 = 0.5;
 
 /// Check `moves` (starting at `start`) against `machine` and `tool`; `Err` names the first violation.
 pub fn check(moves: &[Move], start: P3, machine: &Machine, tool: &Tool) -> Result<(), String> {
+    // arcs by their chords (their extents and Z feeds lie on them); `n` counts the chords
+    let moves = &*expand_arcs(moves, start);
     let (lo, hi) = bounds(moves, start);
     let t = &machine.travel;
     for (k, (axis, travel)) in [("X", t.x_mm), ("Y", t.y_mm), ("Z", t.z_mm)].iter().enumerate() {

@@ -7,9 +7,11 @@
 //! speed change within `v² = v₀² + 2·a·d`; each segment then takes the time of its trapezoid (or triangle).
 
 use super::machine::Machine;
-use crate::gcode::moves::{Move, P3};
+use crate::gcode::moves::{self, Move, P3};
 
 struct Seg {
+    /// The motion block (program line) it belongs to: an arc is one block of many chords.
+    block: usize,
     len: f64,
     dir: P3,
     v_nom: f64,
@@ -38,7 +40,18 @@ pub fn estimate_s(moves: &[Move], start: P3, machine: &Machine) -> f64 {
 /// Estimated time of a move list, with and without a block-rate limit (`max_blocks_s`), and its peak block
 /// rate over a sliding one-second window.
 pub fn estimate(moves: &[Move], start: P3, machine: &Machine, max_blocks_s: Option<f64>) -> Estimate {
-    let (dwell, times) = segment_times(moves, start, machine);
+    let (dwell, seg_times) = segment_times(moves, start, machine);
+    // per motion block (an arc's chords are one block)
+    let mut times: Vec<f64> = vec![];
+    let mut last = usize::MAX;
+    for (block, t) in seg_times {
+        if block == last {
+            *times.last_mut().expect("a block was started") += t;
+        } else {
+            times.push(t);
+            last = block;
+        }
+    }
     let s = dwell + times.iter().sum::<f64>();
     let block_limited_s = match max_blocks_s {
         Some(r) if r > 0.0 => dwell + times.iter().map(|t| t.max(1.0 / r)).sum::<f64>(),
@@ -66,17 +79,39 @@ pub fn estimate(moves: &[Move], start: P3, machine: &Machine, max_blocks_s: Opti
     }
 }
 
-/// The dwell total and the planned time of each motion segment, s.
-fn segment_times(moves: &[Move], start: P3, machine: &Machine) -> (f64, Vec<f64>) {
+/// The dwell total and the planned time of each motion segment with its block, s; an arc is planned as
+/// chords within [`moves::CHORD_TOL_MM`] (a controller's arc segments are of that order: GRBL's `$12` is
+/// 2 µm), which only changes its junction speeds by the chords' small angles.
+fn segment_times(moves: &[Move], start: P3, machine: &Machine) -> (f64, Vec<(usize, f64)>) {
     let l = &machine.limits;
     let mut segs: Vec<Seg> = vec![];
     let mut stops: Vec<usize> = vec![]; // indices of segments that must start from rest
     let mut dwell = 0.0;
     let mut at = start;
-    for m in moves {
+    let mut chords: Vec<(usize, Move)> = Vec::with_capacity(moves.len());
+    for (k, m) in moves.iter().enumerate() {
+        match *m {
+            Move::Arc(a) => {
+                chords.extend(
+                    a.points(at, moves::CHORD_TOL_MM)
+                        .into_iter()
+                        .map(|p| (k, Move::Feed(p, a.feed_mm_min))),
+                );
+                at = a.to;
+            }
+            Move::Rapid(p) | Move::Feed(p, _) => {
+                chords.push((k, *m));
+                at = p;
+            }
+            _ => chords.push((k, *m)),
+        }
+    }
+    let mut at = start;
+    for &(block, ref m) in &chords {
         let (p, speed_mm_min, rapid) = match *m {
             Move::Rapid(p) => (p, 0.0, true),
             Move::Feed(p, f) => (p, f, false),
+            Move::Arc(_) => unreachable!("arcs are expanded above"),
             Move::Dwell(s) => {
                 dwell += s;
                 stops.push(segs.len());
@@ -116,6 +151,7 @@ fn segment_times(moves: &[Move], start: P3, machine: &Machine) -> (f64, Vec<f64>
             acc = acc.min(l.acceleration_z_mm_s2 / dir[2].abs());
         }
         segs.push(Seg {
+            block,
             len,
             dir,
             v_nom: v / 60.0,
@@ -170,7 +206,7 @@ fn segment_times(moves: &[Move], start: P3, machine: &Machine) -> (f64, Vec<f64>
         let d_acc = (vp * vp - v0 * v0) / (2.0 * a);
         let d_dec = (vp * vp - v1 * v1) / (2.0 * a);
         let d_cruise = (s.len - d_acc - d_dec).max(0.0);
-        times.push((vp - v0) / a + (vp - v1) / a + d_cruise / vp.max(1e-12));
+        times.push((s.block, (vp - v0) / a + (vp - v1) / a + d_cruise / vp.max(1e-12)));
     }
     (dwell, times)
 }

@@ -3,12 +3,14 @@
 //! - [`machine`]: versioned machine profiles (`machines/*.toml`) with their tools.
 //! - [`dropcutter`]: the exact cutter-location surface of a ball, flat or bull-nose bit ([`crate::tool::Shape`]) over a heightfield.
 //! - `raster`: raster passes at any angle over the tile repeated across the work area.
-//! - `simplify`: one-sided removal of collinear points within a stated tolerance.
+//! - `simplify`: one-sided removal of collinear points within a stated tolerance; `arcs`: `G2`/`G3` in the
+//!   pass plane (`G18`, `G19`) where a run of blocks lies on one circle, one-sided within it.
 //! - [`check`], `estimate`: the machine check and the run-time estimate; the program is written by `crate::gcode::emit`.
 //!
 //! The program cuts roughing layers first when the design is deeper than the tool's depth of cut
 //! (z = max(layer, CL_rough + leave)), then the finishing raster at the stepover of the target scallop.
 
+pub(crate) mod arcs;
 mod build;
 pub mod check;
 pub mod dropcutter;
@@ -65,6 +67,8 @@ pub struct ToolpathConfig {
     pub feed_mm_min: f64,
     /// Job name for the header.
     pub job: String,
+    /// Fit `G2`/`G3` arcs in the pass plane (`G18` at 0°, `G19` at 90°; passes at other angles stay lines).
+    pub arcs: bool,
 }
 
 impl Default for ToolpathConfig {
@@ -81,6 +85,7 @@ impl Default for ToolpathConfig {
             tolerance_um: 0.5,
             feed_mm_min: 0.0,
             job: "brdfmill tile".into(),
+            arcs: true,
         }
     }
 }
@@ -171,6 +176,9 @@ pub struct Summary {
     /// short for a ramp).
     #[serde(default)]
     pub plunged_entries: usize,
+    /// Finishing blocks written as `G2`/`G3` arcs in the pass plane.
+    #[serde(default)]
+    pub arc_blocks: usize,
 }
 
 /// A finished program.
@@ -349,6 +357,58 @@ fn gouge_check(design: &raster::RotatedDesign, dc: &dropcutter::DropCutter, fini
     (checked.len(), max_gouge)
 }
 
+/// Pass positions on the machine's resolution `q` when the raster runs along X or Y (there a pass's cross
+/// coordinate is its `v`): the emitter would otherwise round the whole pass sideways by up to `q/2`, onto
+/// CL the drop-cutter did not compute. The first and last move inward, the others to the nearest step.
+fn on_resolution(design: &raster::RotatedDesign, vs: Vec<f64>, q: f64) -> Vec<f64> {
+    let (c, s) = design.cos_sin();
+    if (c != 0.0 && s != 0.0) || vs.len() < 2 {
+        return vs;
+    }
+    let n = vs.len();
+    vs.iter()
+        .enumerate()
+        .map(|(k, v)| {
+            let steps = v / q;
+            let steps = if k == 0 {
+                (steps - 1e-9).ceil()
+            } else if k + 1 == n {
+                (steps + 1e-9).floor()
+            } else {
+                steps.round()
+            };
+            steps * q
+        })
+        .collect()
+}
+
+/// Raise each CL point of a pass by `(q/2)·|s|`, `s` the steeper of the CL slopes to its two neighbours: the
+/// emitter rounds X/Y to the nearest step `q` (Z up), which moves a point along the pass by up to `q/2`, where
+/// the CL surface stands up to `|s|·q/2` higher (0.47 µm on a 43° facet at 1 µm). Raised, no written point
+/// lies below the CL surface (the gouge check reads the points as written).
+fn lift_for_rounding(pass: &mut [P3], q: f64) {
+    let n = pass.len();
+    if n < 2 {
+        return;
+    }
+    let slope = |a: P3, b: P3| {
+        let d = (b[0] - a[0]).hypot(b[1] - a[1]);
+        if d > 0.0 {
+            ((b[2] - a[2]) / d).abs()
+        } else {
+            0.0
+        }
+    };
+    let lifts: Vec<f64> = (0..n)
+        .map(|i| {
+            let l = if i > 0 { slope(pass[i - 1], pass[i]) } else { 0.0 };
+            let r = if i + 1 < n { slope(pass[i], pass[i + 1]) } else { 0.0 };
+            0.5 * q * l.max(r)
+        })
+        .collect();
+    pass.iter_mut().zip(lifts).for_each(|(p, l)| p[2] += l);
+}
+
 /// The stock the moves so far leave, on the design's `(u, v)` grid: the roughing swept by the simulator's
 /// closed-form sweep ([`crate::simulate::stock::sweep`]), so the finishing knows what material remains.
 fn stock_left(design: &raster::RotatedDesign, moves: &[Move], start: P3, bit: Shape) -> Heightfield {
@@ -357,7 +417,7 @@ fn stock_left(design: &raster::RotatedDesign, moves: &[Move], start: P3, bit: Sh
     let uv = |p: P3| [p[0] * c + p[1] * s, -p[0] * s + p[1] * c, p[2]];
     let mut at = start;
     let mut segs = vec![];
-    for m in moves {
+    for m in moves::expand_arcs(moves, start).iter() {
         if let Move::Rapid(p) | Move::Feed(p, _) = *m {
             if p != at {
                 segs.push(Segment {
@@ -444,7 +504,7 @@ fn stock_cl_rows(
 /// `doc`. With `S` the CL surface of the finishing tool over the stock as it stands (the lowest its tip can
 /// sit without touching it), the tip engages `S − z` deep. While some point has `S − CL > doc`, a level runs
 /// at `z = S − doc` over the points where `S − CL > doc` (each run keeps one point at `CL` at either end;
-/// gaps up to two tool diameters are ridden at `max(CL, S − doc)`), and the stock is then re-swept with that
+/// gaps up to [`rough::GAP_DIAMETERS`] tool diameters are ridden at `max(CL, S − doc)`), and the stock is then re-swept with that
 /// level's moves ([`stock_left`]), so each level is measured against the stock the one before it left, not
 /// against an estimate. Points within the depth of cut are left to the final raster, which then engages at
 /// most `doc` everywhere. Returns the number of levels.
@@ -557,36 +617,88 @@ fn intermediate_levels(
     }
 }
 
+/// A finishing pass in cutting order: its simplified points (the one-sided polyline an entry ramps along)
+/// and its blocks (lines and arcs, [`arcs::fit`]).
+struct Pass {
+    pts: Vec<P3>,
+    pieces: Vec<arcs::Piece>,
+}
+
+/// The finishing passes from the raw CL rows: each oriented for `strategy` (zigzag reverses every other
+/// pass; one-way passes run in −u so that the uncut side (+v) is on the right: climb for M3), simplified,
+/// and fitted with arcs in the pass plane on resolution `q` when `arcs_on`.
+fn finishing_passes(raw: &[Vec<P3>], strategy: Strategy, tol: f64, q: f64, arcs_on: bool) -> Vec<Pass> {
+    raw.par_iter()
+        .enumerate()
+        .map(|(k, pass)| {
+            let mut raw: Vec<P3> = pass.clone();
+            if matches!(strategy, Strategy::Oneway) || k % 2 == 1 {
+                raw.reverse();
+            }
+            let plane = if arcs_on { arcs::pass_plane(&raw) } else { None };
+            Pass {
+                pts: simplify::simplify(&raw, tol),
+                pieces: arcs::fit(&raw, tol, q, plane),
+            }
+        })
+        .collect()
+}
+
+/// The points the independent gouge check reads for a pass, as the emitter writes them (on the resolution
+/// `q`, Z rounded up): its simplified points and, along each arc, its points every 0.1 µm of chord error as
+/// the controller draws it (from the quantised start).
+fn check_points(pass: &Pass, q: f64) -> Vec<P3> {
+    let mut out: Vec<P3> = pass
+        .pts
+        .iter()
+        .map(|p| [0, 1, 2].map(|k| emit::quantize(p[k], k, q)))
+        .collect();
+    let Some(&first) = pass.pts.first() else {
+        return out;
+    };
+    let mut at = first;
+    for pc in &pass.pieces {
+        match pc {
+            arcs::Piece::Line(p) => at = *p,
+            arcs::Piece::Arc(a) => {
+                let from = [0, 1, 2].map(|k| emit::quantize(at[k], k, q));
+                out.extend(a.points(from, moves::CHORD_TOL_MM));
+                at = a.to;
+            }
+        }
+    }
+    out
+}
+
 /// The final finishing raster at the CL surface.
 fn finishing(
     b: &mut Builder,
     design: &raster::RotatedDesign,
     dc: &dropcutter::DropCutter,
-    passes: &[Vec<P3>],
+    passes: &[Pass],
     strategy: Strategy,
     feed: f64,
     tol: f64,
 ) {
     b.moves.push(Move::Comment("finishing"));
     let mut first = true;
-    for (k, pass) in passes.iter().enumerate() {
-        if pass.is_empty() {
+    for pass in passes {
+        if pass.pts.is_empty() {
             continue;
         }
-        let pts: Vec<P3> = match strategy {
-            Strategy::Zigzag | Strategy::Auto if k % 2 == 1 => pass.iter().rev().copied().collect(),
-            Strategy::Zigzag | Strategy::Auto => pass.clone(),
-            // one-way passes run in −u so that the uncut side (+v) is on the right: climb for M3
-            Strategy::Oneway => pass.iter().rev().copied().collect(),
-        };
         if first || strategy == Strategy::Oneway {
-            b.approach(&pts);
+            b.approach(&pass.pts);
             first = false;
         } else {
-            let link = link_points(design, dc, b.at, pts[0], |z| z);
+            let link = link_points(design, dc, b.at, pass.pts[0], |z| z);
             b.path(&simplify::simplify(&link, tol), feed);
         }
-        b.path(&pts[1..], feed);
+        for pc in &pass.pieces {
+            match *pc {
+                arcs::Piece::Line(p) => b.feed(p, feed),
+                arcs::Piece::Arc(a) => b.arc(a, feed),
+            }
+        }
         if strategy == Strategy::Oneway {
             let up = [b.at[0], b.at[1], LEAD_MM.max(b.at[2])];
             let f = b.machine.limits.max_feed_z_mm_min;
@@ -613,8 +725,10 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
     let tol = cfg.tolerance_um * 1e-3;
     let dc = design.cutter(tool.shape);
     let (vmin, vmax) = design.v_range();
-    let vs = raster::pass_positions(vmin, vmax, stepover);
-    let raw = cl_rows(&design, &dc, &vs);
+    let q = machine.limits.resolution_mm;
+    let vs = on_resolution(&design, raster::pass_positions(vmin, vmax, stepover), q);
+    let mut raw = cl_rows(&design, &dc, &vs);
+    raw.par_iter_mut().for_each(|pass| lift_for_rounding(pass, q));
     let depth = -raw.iter().flatten().map(|p| p[2]).fold(f64::INFINITY, f64::min);
 
     // roughing whenever the finishing tool could not take the depth in one cut; the allowance is half the
@@ -672,8 +786,14 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         tol,
     )?;
     drop(stock);
-    let passes: Vec<Vec<P3>> = raw.par_iter().map(|pts| simplify::simplify(pts, tol)).collect();
-    let (checked_points, max_gouge) = gouge_check(&design, &dc, &passes);
+    let passes = finishing_passes(&raw, strategy, tol, q, cfg.arcs);
+    let checked: Vec<Vec<P3>> = passes.par_iter().map(|p| check_points(p, q)).collect();
+    let (checked_points, max_gouge) = gouge_check(&design, &dc, &checked);
+    let arc_blocks = passes
+        .iter()
+        .flat_map(|p| &p.pieces)
+        .filter(|pc| matches!(pc, arcs::Piece::Arc(_)))
+        .count();
     finishing(&mut b, &design, &dc, &passes, strategy, feed, tol);
     b.stop_tool();
     let (ramped_entries, plunged_entries) = (b.ramped_entries, b.plunged_entries);
@@ -732,6 +852,7 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
         spindle_rpm: cut.spindle_rpm,
         ramped_entries,
         plunged_entries,
+        arc_blocks,
     };
     Ok(Toolpath { moves, gcode, summary })
 }

@@ -12,10 +12,15 @@ use crate::gcode::moves::P3;
 /// `[0, tol]` below the chord is narrowed point by point; the chord to `b` is allowed while its slope lies in
 /// the interval and `b` is on the same straight line in x, y.
 pub fn simplify(points: &[P3], tol: f64) -> Vec<P3> {
+    kept(points, tol).into_iter().map(|k| points[k]).collect()
+}
+
+/// The indices of the points [`simplify`] keeps, increasing, first and last included.
+pub fn kept(points: &[P3], tol: f64) -> Vec<usize> {
     if points.len() <= 2 {
-        return points.to_vec();
+        return (0..points.len()).collect();
     }
-    let mut out = vec![points[0]];
+    let mut out = vec![0];
     let mut a = 0;
     while a < points.len() - 1 {
         let pa = points[a];
@@ -48,7 +53,7 @@ pub fn simplify(points: &[P3], tol: f64) -> Vec<P3> {
                 b += 1;
             }
         }
-        out.push(points[b]);
+        out.push(b);
         a = b;
     }
     out

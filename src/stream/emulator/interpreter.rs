@@ -1,7 +1,7 @@
 //! The G-code interpreter (GRBL's `gc_execute_line`, `gcode.c`) for the modelled subset: words from
 //! [`program::words`](crate::stream::program::words), modal groups and GRBL's error codes, the modal state
 //! as a [`program::Modal`](crate::stream::program::Modal), targets in absolute or incremental mm or inches,
-//! I/J arcs in G17 checked for radius, soft limits, and the hand-over of the resulting motion to the
+//! arcs in G17, G18 and G19 (I J K offsets) checked for radius, soft limits, and the hand-over of the resulting motion to the
 //! planner. Words outside the subset answer `error:20` and are logged as not modelled.
 
 use std::collections::HashSet;
@@ -35,7 +35,7 @@ struct Parsed {
     /// M7, which only a build with `ENABLE_M7` accepts.
     mist_word: bool,
     axis: [Option<f64>; 3],
-    ij: [Option<f64>; 2],
+    ijk: [Option<f64>; 3],
     f: Option<f64>,
     s: Option<f64>,
     p: Option<f64>,
@@ -172,8 +172,9 @@ impl Parsed {
             'X' => self.axis[0] = Some(v),
             'Y' => self.axis[1] = Some(v),
             'Z' => self.axis[2] = Some(v),
-            'I' => self.ij[0] = Some(v),
-            'J' => self.ij[1] = Some(v),
+            'I' => self.ijk[0] = Some(v),
+            'J' => self.ijk[1] = Some(v),
+            'K' => self.ijk[2] = Some(v),
             'F' => self.f = Some(v),
             'S' => self.s = Some(v),
             'P' => self.p = Some(v),
@@ -183,7 +184,7 @@ impl Parsed {
                 }
             }
             'T' => {}
-            'K' | 'R' | 'L' => self.unmodelled = Some(format!("{letter} word")),
+            'R' | 'L' => self.unmodelled = Some(format!("{letter} word")),
             _ => return Err(20),
         }
         if matches!(letter, 'F' | 'S' | 'P' | 'T' | 'N') && v < 0.0 {
@@ -206,7 +207,7 @@ impl Parsed {
             return Err(36);
         }
         let arc = has_axis && matches!(m.motion, MotionMode::ArcCw | MotionMode::ArcCcw);
-        if self.ij.iter().any(Option::is_some) && !arc {
+        if self.ijk.iter().any(Option::is_some) && !arc {
             return Err(36);
         }
         if has_axis && m.motion == MotionMode::Cancel {
@@ -303,34 +304,34 @@ impl Controller {
         })
     }
 
-    /// An I/J arc in G17 from the parser position to `target`, with GRBL's arc errors.
-    fn arc(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], k: f64, text: &str) -> Result<BlockKind, u16> {
-        if m.plane != 17 {
-            self.log
-                .events
-                .push(format!("not modelled: arc outside G17 in `{text}`"));
-            return Err(20);
-        }
-        let (axis, ij) = (parsed.axis, parsed.ij);
-        if axis[0].is_none() && axis[1].is_none() {
+    /// An arc in the block's plane (offsets `I J` in G17, `K I` in G18, `J K` in G19) from the parser
+    /// position to `target`, with GRBL's arc errors: 32 without an in-plane axis word, 35 without an in-plane
+    /// offset (one normal to the plane is read and ignored, as GRBL clears all three), 33 when the end radius
+    /// differs from the start's by more than 0.005 mm and either 0.5 mm or 0.1% (GRBL 1.1 `gc_execute_line`).
+    fn arc(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], k: f64, _text: &str) -> Result<BlockKind, u16> {
+        let axes = super::planner::plane_axes(m.plane);
+        let [a, b, _] = axes;
+        let (axis, ijk) = (parsed.axis, parsed.ijk);
+        if axis[a].is_none() && axis[b].is_none() {
             return Err(32);
         }
-        if ij[0].is_none() && ij[1].is_none() {
+        if ijk[a].is_none() && ijk[b].is_none() {
             return Err(35);
         }
         let c = [
-            self.parser_pos[0] + ij[0].unwrap_or(0.0) * k,
-            self.parser_pos[1] + ij[1].unwrap_or(0.0) * k,
+            self.parser_pos[a] + ijk[a].unwrap_or(0.0) * k,
+            self.parser_pos[b] + ijk[b].unwrap_or(0.0) * k,
         ];
-        let r0 = ((self.parser_pos[0] - c[0]).powi(2) + (self.parser_pos[1] - c[1]).powi(2)).sqrt();
-        let r1 = ((target[0] - c[0]).powi(2) + (target[1] - c[1]).powi(2)).sqrt();
-        // GRBL: error 33 when the end radius differs by more than 0.5 mm and 0.1 %.
-        if (r1 - r0).abs() > 0.5 && (r1 - r0).abs() > 0.001 * r0 {
+        let r0 = (self.parser_pos[a] - c[0]).hypot(self.parser_pos[b] - c[1]);
+        let r1 = (target[a] - c[0]).hypot(target[b] - c[1]);
+        let dr = (r1 - r0).abs();
+        if dr > 0.005 && (dr > 0.5 || dr > 0.001 * r0) {
             return Err(33);
         }
         Ok(BlockKind::Arc {
             center: c,
             cw: m.motion == MotionMode::ArcCw,
+            axes,
         })
     }
 

@@ -1,4 +1,4 @@
-//! Motion: the blocks the interpreter makes (lines and I/J arcs, timed at their feed — cruising at it, no
+//! Motion: the blocks the interpreter makes (lines and arcs in G17, G18 or G19, timed at their feed — cruising at it, no
 //! acceleration between blocks — and limited by each axis' maximum rate), a feed hold that decelerates
 //! along the planned path, GRBL's 15-block planner, the commands that wait for it to empty (spindle,
 //! coolant, dwell, program end), and simulated execution — the machine position moving along
@@ -8,12 +8,27 @@ use super::controller::{Controller, State};
 use super::Piece;
 use crate::stream::protocol::PLANNER_BLOCKS;
 
-/// How a block moves: straight at the rapid rate, straight at its feed, or along an I/J arc in G17.
+/// How a block moves: straight at the rapid rate, straight at its feed, or along an arc in the plane whose
+/// (first, second, normal) axes are `axes` (G17 X Y Z, G18 Z X Y, G19 Y Z X), `center` in the first two,
+/// clockwise seen from the normal's positive end when `cw`, linear along the normal.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub(super) enum BlockKind {
     Rapid,
     Linear,
-    Arc { center: [f64; 2], cw: bool },
+    Arc {
+        center: [f64; 2],
+        cw: bool,
+        axes: [usize; 3],
+    },
+}
+
+/// The (first, second, normal) axes of a plane (17, 18, 19).
+pub(super) fn plane_axes(plane: u8) -> [usize; 3] {
+    match plane {
+        18 => [2, 0, 1],
+        19 => [1, 2, 0],
+        _ => [0, 1, 2],
+    }
 }
 
 /// A planned motion block, in machine coordinates (mm).
@@ -33,27 +48,33 @@ pub(super) struct Block {
 impl Block {
     fn at(&self, t: f64) -> [f64; 3] {
         let t = t.clamp(0.0, 1.0);
-        let z = self.from[2] + (self.to[2] - self.from[2]) * t;
         match self.kind {
-            BlockKind::Arc { center, cw } => {
-                let (a0, sweep) = arc_sweep(self.from, self.to, center, cw);
-                let r = ((self.from[0] - center[0]).powi(2) + (self.from[1] - center[1]).powi(2)).sqrt();
-                let a = a0 + sweep * t;
+            BlockKind::Arc {
+                center,
+                cw,
+                axes: [a, b, n],
+            } => {
                 if t >= 1.0 {
-                    self.to
-                } else {
-                    [center[0] + r * a.cos(), center[1] + r * a.sin(), z]
+                    return self.to;
                 }
+                let (a0, sweep) = arc_sweep(self.from, self.to, center, cw, [a, b]);
+                let r = (self.from[a] - center[0]).hypot(self.from[b] - center[1]);
+                let ang = a0 + sweep * t;
+                let mut p = [0.0; 3];
+                p[a] = center[0] + r * ang.cos();
+                p[b] = center[1] + r * ang.sin();
+                p[n] = self.from[n] + (self.to[n] - self.from[n]) * t;
+                p
             }
             _ => std::array::from_fn(|i| self.from[i] + (self.to[i] - self.from[i]) * t),
         }
     }
 }
 
-/// Start angle and signed sweep of an arc (full circle when start = end).
-fn arc_sweep(from: [f64; 3], to: [f64; 3], c: [f64; 2], cw: bool) -> (f64, f64) {
-    let a0 = (from[1] - c[1]).atan2(from[0] - c[0]);
-    let a1 = (to[1] - c[1]).atan2(to[0] - c[0]);
+/// Start angle and signed sweep of an arc in the plane axes `[a, b]` (full circle when start = end).
+fn arc_sweep(from: [f64; 3], to: [f64; 3], c: [f64; 2], cw: bool, [a, b]: [usize; 2]) -> (f64, f64) {
+    let a0 = (from[b] - c[1]).atan2(from[a] - c[0]);
+    let a1 = (to[b] - c[1]).atan2(to[a] - c[0]);
     let mut sweep = a1 - a0;
     if cw {
         if sweep >= -1e-9 {
@@ -97,10 +118,14 @@ impl Controller {
             .map(|i| d[i].abs() / (self.setting(110 + i as u16).max(1e-9) / 60.0))
             .fold(0.0, f64::max);
         let length = match kind {
-            BlockKind::Arc { center, cw } => {
-                let (_, sweep) = arc_sweep(from, to, center, cw);
-                let r = ((from[0] - center[0]).powi(2) + (from[1] - center[1]).powi(2)).sqrt();
-                ((r * sweep).powi(2) + d[2].powi(2)).sqrt()
+            BlockKind::Arc {
+                center,
+                cw,
+                axes: [a, b, n],
+            } => {
+                let (_, sweep) = arc_sweep(from, to, center, cw, [a, b]);
+                let r = (from[a] - center[0]).hypot(from[b] - center[1]);
+                ((r * sweep).powi(2) + d[n].powi(2)).sqrt()
             }
             _ => (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(),
         };

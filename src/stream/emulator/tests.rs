@@ -195,3 +195,27 @@ fn faults_fire_once() {
     assert!(send(&mut c, "N4G0X2\n").starts_with("ALARM:2"));
     assert!("x:error".parse::<Fault>().is_err());
 }
+
+#[test]
+fn arcs_in_every_plane_follow_grbl() {
+    let mut c = ctl();
+    assert_eq!(send(&mut c, "G1X0Y0Z0F600\n"), "ok\r\n");
+    // G18: Z→X plane, offsets K I; clockwise seen from +Y, so from (0,0,0) to (2,0,0) about (1,0,0) the
+    // tool dips to z = -1 (counter-clockwise with X drawn right, Z up)
+    assert_eq!(send(&mut c, "G18G2X2Z0I1K0\n"), "ok\r\n");
+    let mut lowest = f64::INFINITY;
+    for _ in 0..400 {
+        c.advance(0.005);
+        lowest = lowest.min(c.position()[2]);
+    }
+    let end = c.position();
+    assert!((end[0] - 2.0).abs() < 1e-9 && end[2].abs() < 1e-9, "{end:?}");
+    assert!((lowest + 1.0).abs() < 0.01, "dips to z = -1: {lowest}");
+    // in-plane words are required; a J in G18 is read and ignored as GRBL clears I, J and K together
+    assert_eq!(send(&mut c, "G18G2Y1J1\n"), "error:32\r\n", "no in-plane axis word");
+    assert_eq!(send(&mut c, "G18G2X4J1\n"), "error:35\r\n", "no in-plane offset");
+    assert_eq!(send(&mut c, "G18G2X4I1J7\n"), "ok\r\n");
+    // G19: Y→Z, offsets J K; radius mismatch beyond 0.005 mm and 0.1%: error:33
+    assert_eq!(send(&mut c, "G19G3Y2.01Z0J1K0\n"), "error:33\r\n");
+    assert_eq!(send(&mut c, "G19G3Y2.004Z0J1K0\n"), "ok\r\n", "within 0.005 mm");
+}
