@@ -240,6 +240,11 @@ pub fn quantize(v: f64, axis: usize, q: f64) -> f64 {
     steps * q
 }
 
+/// A point on the resolution `q` as [`quantize`] writes each of its coordinates.
+pub fn quantize_point(p: P3, q: f64) -> P3 {
+    [0, 1, 2].map(|k| quantize(p[k], k, q))
+}
+
 /// [`quantize`], written.
 fn coord(m: &Modal, axis: usize, v: f64) -> String {
     num(quantize(v, axis, m.resolution_mm), m.decimals)

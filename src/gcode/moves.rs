@@ -63,6 +63,15 @@ impl Plane {
         }
     }
 
+    /// The plane a modal `G17`/`G18`/`G19` (as 17, 18, 19) selects; anything else is the default XY.
+    pub fn from_g(g: u8) -> Plane {
+        match g {
+            18 => Plane::Zx,
+            19 => Plane::Yz,
+            _ => Plane::Xy,
+        }
+    }
+
     /// The G word selecting it.
     pub fn g(self) -> u8 {
         match self {
@@ -151,26 +160,32 @@ pub fn expand_arcs(moves: &[Move], start: P3) -> std::borrow::Cow<'_, [Move]> {
     if !moves.iter().any(|m| matches!(m, Move::Arc(_))) {
         return std::borrow::Cow::Borrowed(moves);
     }
+    std::borrow::Cow::Owned(chords(moves, start).into_iter().map(|(_, m)| m).collect())
+}
+
+/// The moves with every arc replaced by feed moves along its chords ([`CHORD_TOL_MM`]), each tagged with the
+/// index of the move it came from (an arc's chords share theirs: one block).
+pub fn chords(moves: &[Move], start: P3) -> Vec<(usize, Move)> {
     let mut out = Vec::with_capacity(moves.len() * 2);
     let mut at = start;
-    for m in moves {
+    for (k, m) in moves.iter().enumerate() {
         match *m {
             Move::Arc(arc) => {
                 out.extend(
                     arc.points(at, CHORD_TOL_MM)
                         .into_iter()
-                        .map(|p| Move::Feed(p, arc.feed_mm_min)),
+                        .map(|p| (k, Move::Feed(p, arc.feed_mm_min))),
                 );
                 at = arc.to;
             }
             Move::Rapid(p) | Move::Feed(p, _) => {
-                out.push(*m);
+                out.push((k, *m));
                 at = p;
             }
-            _ => out.push(*m),
+            _ => out.push((k, *m)),
         }
     }
-    std::borrow::Cow::Owned(out)
+    out
 }
 
 /// Coolant commands.

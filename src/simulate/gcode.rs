@@ -33,7 +33,7 @@
 
 use crate::gcode::lex::{g_name as gname, lex, tenths, Block, Word};
 use crate::gcode::modal::{Distance, Modal, MotionMode, Units};
-use crate::gcode::moves::{Move, P3};
+use crate::gcode::moves::{Move, Plane, P3};
 use serde::{Deserialize, Serialize};
 
 /// A program that cannot be simulated: where and why. Line and column count from 1 (columns in characters).
@@ -576,11 +576,7 @@ fn arc(
     use std::f64::consts::TAU;
     let u = st.modal.units.mm();
     // the plane's (first, second, normal) axes and their letters; below, x/y/z and I/J name them
-    let (fa, sa, na) = match st.modal.plane {
-        18 => (2, 0, 1),
-        19 => (1, 2, 0),
-        _ => (0, 1, 2),
-    };
+    let (fa, sa, na) = Plane::from_g(st.modal.plane).axes();
     let (axis, off) = (['X', 'Y', 'Z'], ['I', 'J', 'K']);
     let normal_offset = off[na];
     if let Some((_, c)) = get(normal_offset) {

@@ -16,7 +16,7 @@
 //! next line.
 
 use super::simplify;
-use crate::gcode::emit::quantize;
+use crate::gcode::emit::quantize_point;
 use crate::gcode::moves::{Arc, Plane, P3};
 
 /// The fewest line blocks an arc must replace.
@@ -116,8 +116,7 @@ pub fn fit(raw: &[P3], tol: f64, q: f64, plane: Option<Plane>) -> Vec<Piece> {
 /// The quantised arc from `raw[ia]` to `raw[ib]` over the raw points between, if one passes.
 fn arc(raw: &[P3], ia: usize, ib: usize, tol: f64, q: f64, plane: Plane) -> Option<Arc> {
     let h = if plane == Plane::Zx { 0 } else { 1 };
-    let qz = |p: P3| [quantize(p[0], 0, q), quantize(p[1], 1, q), quantize(p[2], 2, q)];
-    let (a3, b3) = (qz(raw[ia]), qz(raw[ib]));
+    let (a3, b3) = (quantize_point(raw[ia], q), quantize_point(raw[ib], q));
     // (t, z) with t increasing along the pass
     let sgn = if b3[h] > a3[h] { 1.0 } else { -1.0 };
     let (a, b) = ([0.0, a3[2]], [sgn * (b3[h] - a3[h]), b3[2]]);
@@ -231,13 +230,15 @@ mod tests {
     /// The z a controller draws at `x` for the pieces from `start`, every end rounded as the emitter writes
     /// it (lines by interpolation, arcs on their circle from the rounded start's radius).
     fn drawn(start: P3, pieces: &[Piece], x: f64, q: f64) -> f64 {
-        let qz = |p: P3| [0, 1, 2].map(|k| quantize(p[k], k, q));
-        let mut at = qz(start);
+        let mut at = quantize_point(start, q);
         for pc in pieces {
-            let to = qz(match pc {
-                Piece::Line(p) => *p,
-                Piece::Arc(a) => a.to,
-            });
+            let to = quantize_point(
+                match pc {
+                    Piece::Line(p) => *p,
+                    Piece::Arc(a) => a.to,
+                },
+                q,
+            );
             let (lo, hi) = (at[0].min(to[0]), at[0].max(to[0]));
             if x >= lo - 1e-12 && x <= hi + 1e-12 {
                 return match pc {

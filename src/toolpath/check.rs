@@ -2,15 +2,14 @@
 //! profile and the tool. A violation names the limit, its value and the offending value.
 
 use super::machine::{Machine, Tool};
-use crate::gcode::moves::{bounds, expand_arcs, Move, P3};
+use crate::gcode::moves::{bounds, chords, Move, P3};
 
 /// Clearance above the stock top (z = 0) below which a rapid may not go, mm.
 pub const RAPID_FLOOR_MM: f64 = 0.5;
 
 /// Check `moves` (starting at `start`) against `machine` and `tool`; `Err` names the first violation.
 pub fn check(moves: &[Move], start: P3, machine: &Machine, tool: &Tool) -> Result<(), String> {
-    // arcs by their chords (their extents and Z feeds lie on them); `n` counts the chords
-    let moves = &*expand_arcs(moves, start);
+    // extents and feeds of arcs by their chords (both lie on them)
     let (lo, hi) = bounds(moves, start);
     let t = &machine.travel;
     for (k, (axis, travel)) in [("X", t.x_mm), ("Y", t.y_mm), ("Z", t.z_mm)].iter().enumerate() {
@@ -34,7 +33,8 @@ pub fn check(moves: &[Move], start: P3, machine: &Machine, tool: &Tool) -> Resul
     let l = &machine.limits;
     let safe = machine.program.safe_z_mm;
     let mut at = start;
-    for (n, m) in moves.iter().enumerate() {
+    // `n`: the move a chord came from, so a violation names the move list's own index
+    for &(n, ref m) in &chords(moves, start) {
         match *m {
             Move::Feed(p, f) => {
                 let dxy = ((p[0] - at[0]).powi(2) + (p[1] - at[1]).powi(2)).sqrt();

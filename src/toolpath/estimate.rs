@@ -88,26 +88,7 @@ fn segment_times(moves: &[Move], start: P3, machine: &Machine) -> (f64, Vec<(usi
     let mut stops: Vec<usize> = vec![]; // indices of segments that must start from rest
     let mut dwell = 0.0;
     let mut at = start;
-    let mut chords: Vec<(usize, Move)> = Vec::with_capacity(moves.len());
-    for (k, m) in moves.iter().enumerate() {
-        match *m {
-            Move::Arc(a) => {
-                chords.extend(
-                    a.points(at, moves::CHORD_TOL_MM)
-                        .into_iter()
-                        .map(|p| (k, Move::Feed(p, a.feed_mm_min))),
-                );
-                at = a.to;
-            }
-            Move::Rapid(p) | Move::Feed(p, _) => {
-                chords.push((k, *m));
-                at = p;
-            }
-            _ => chords.push((k, *m)),
-        }
-    }
-    let mut at = start;
-    for &(block, ref m) in &chords {
+    for &(block, ref m) in &moves::chords(moves, start) {
         let (p, speed_mm_min, rapid) = match *m {
             Move::Rapid(p) => (p, 0.0, true),
             Move::Feed(p, f) => (p, f, false),

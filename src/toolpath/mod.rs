@@ -452,21 +452,23 @@ fn stock_left(design: &raster::RotatedDesign, moves: &[Move], start: P3, bit: Sh
 /// Columns per block of the stock's change map ([`stock_cl_rows`]).
 const CHANGE_BLOCK: usize = 64;
 
-/// The CL surface of `cutter` over `stock` along each pass `vs[k]`, at its columns `cols[k]`, into `rows[k]`.
+/// The CL surface of `cutter` over `stock` (open edges) along each pass `vs[k]`, at its columns `cols[k]`, into `rows[k]`.
 /// With `changed` (per stock row, per [`CHANGE_BLOCK`] columns: whether the stock there was lowered since
 /// `rows` was computed), only the columns whose cutter covers a changed block are recomputed: the others'
 /// samples are the same, so are their values.
 fn stock_cl_rows(
     design: &raster::RotatedDesign,
-    sdc: &dropcutter::DropCutter,
+    stock: &Heightfield,
+    cutter: Shape,
     vs: &[f64],
     cols: &[std::ops::Range<usize>],
     rows: &mut [Vec<f64>],
     changed: Option<&[bool]>,
 ) {
+    let sdc = dropcutter::DropCutter::new(stock, cutter, dropcutter::Edge::Open);
     let (p, nx, ny) = (design.hf.pitch_mm, design.hf.nx, design.hf.ny);
     let nb = nx.div_ceil(CHANGE_BLOCK);
-    let r = sdc.cutter().radius_mm();
+    let r = cutter.radius_mm();
     // blocks either side an output block's cutter reaches into
     let reach = ((r / p).ceil() as usize + 1).div_ceil(CHANGE_BLOCK);
     rows.par_iter_mut().zip(vs).zip(cols).for_each(|((row, v), c)| {
@@ -529,14 +531,7 @@ fn intermediate_levels(
     debug_assert!(cols.iter().zip(finals).all(|(c, f)| c.len() == f.len()));
     let mut s_rows: Vec<Vec<f64>> = cols.iter().map(|c| vec![0.0; c.len()]).collect();
     let cutter = dc.cutter();
-    stock_cl_rows(
-        design,
-        &dropcutter::DropCutter::new(stock, cutter, dropcutter::Edge::Open),
-        vs,
-        &cols,
-        &mut s_rows,
-        None,
-    );
+    stock_cl_rows(design, stock, cutter, vs, &cols, &mut s_rows, None);
     let mut levels = 0;
     loop {
         // the stock never stands above its top
@@ -605,14 +600,7 @@ fn intermediate_levels(
                 changed[(k / stock.nx) * nb + (k % stock.nx) / CHANGE_BLOCK] = true;
             }
         }
-        stock_cl_rows(
-            design,
-            &dropcutter::DropCutter::new(stock, cutter, dropcutter::Edge::Open),
-            vs,
-            &cols,
-            &mut s_rows,
-            Some(&changed),
-        );
+        stock_cl_rows(design, stock, cutter, vs, &cols, &mut s_rows, Some(&changed));
         levels += 1;
     }
 }
@@ -648,11 +636,7 @@ fn finishing_passes(raw: &[Vec<P3>], strategy: Strategy, tol: f64, q: f64, arcs_
 /// `q`, Z rounded up): its simplified points and, along each arc, its points every 0.1 µm of chord error as
 /// the controller draws it (from the quantised start).
 fn check_points(pass: &Pass, q: f64) -> Vec<P3> {
-    let mut out: Vec<P3> = pass
-        .pts
-        .iter()
-        .map(|p| [0, 1, 2].map(|k| emit::quantize(p[k], k, q)))
-        .collect();
+    let mut out: Vec<P3> = pass.pts.iter().map(|p| emit::quantize_point(*p, q)).collect();
     let Some(&first) = pass.pts.first() else {
         return out;
     };
@@ -661,7 +645,7 @@ fn check_points(pass: &Pass, q: f64) -> Vec<P3> {
         match pc {
             arcs::Piece::Line(p) => at = *p,
             arcs::Piece::Arc(a) => {
-                let from = [0, 1, 2].map(|k| emit::quantize(at[k], k, q));
+                let from = emit::quantize_point(at, q);
                 out.extend(a.points(from, moves::CHORD_TOL_MM));
                 at = a.to;
             }
@@ -941,8 +925,14 @@ fn link_points(
     b: P3,
     zmap: impl Fn(f64) -> f64,
 ) -> Vec<P3> {
-    let mut pts = vec![a];
-    pts.extend(link_cl(design, dc, a, b).into_iter().map(|p| [p[0], p[1], zmap(p[2])]));
+    link_through(a, &link_cl(design, dc, a, b), b, zmap)
+}
+
+/// `a`, the link's interior CL points with their z mapped by `zmap`, then `b`.
+fn link_through(a: P3, cl: &[P3], b: P3, zmap: impl Fn(f64) -> f64) -> Vec<P3> {
+    let mut pts = Vec::with_capacity(cl.len() + 2);
+    pts.push(a);
+    pts.extend(cl.iter().map(|p| [p[0], p[1], zmap(p[2])]));
     pts.push(b);
     pts
 }
@@ -974,10 +964,7 @@ impl LinkMemo<'_> {
         let key = [a[0].to_bits(), a[1].to_bits(), b[0].to_bits(), b[1].to_bits()];
         let mut seen = self.seen.borrow_mut();
         let cl = seen.entry(key).or_insert_with(|| link_cl(self.design, self.dc, a, b));
-        let mut pts = vec![a];
-        pts.extend(cl.iter().map(|p| [p[0], p[1], zmap(p[2])]));
-        pts.push(b);
-        pts
+        link_through(a, cl, b, zmap)
     }
 }
 

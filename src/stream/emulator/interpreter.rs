@@ -309,8 +309,8 @@ impl Controller {
     /// offset (one normal to the plane is read and ignored, as GRBL clears all three), 33 when the end radius
     /// differs from the start's by more than 0.005 mm and either 0.5 mm or 0.1% (GRBL 1.1 `gc_execute_line`).
     fn arc(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], k: f64, _text: &str) -> Result<BlockKind, u16> {
-        let axes = super::planner::plane_axes(m.plane);
-        let [a, b, _] = axes;
+        let (a, b, n) = crate::gcode::moves::Plane::from_g(m.plane).axes();
+        let axes = [a, b, n];
         let (axis, ijk) = (parsed.axis, parsed.ijk);
         if axis[a].is_none() && axis[b].is_none() {
             return Err(32);

@@ -22,15 +22,6 @@ pub(super) enum BlockKind {
     },
 }
 
-/// The (first, second, normal) axes of a plane (17, 18, 19).
-pub(super) fn plane_axes(plane: u8) -> [usize; 3] {
-    match plane {
-        18 => [2, 0, 1],
-        19 => [1, 2, 0],
-        _ => [0, 1, 2],
-    }
-}
-
 /// A planned motion block, in machine coordinates (mm).
 #[derive(Debug, Clone)]
 pub(super) struct Block {
