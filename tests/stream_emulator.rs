@@ -531,3 +531,108 @@ fn a_soft_limit_stops_at_once_and_the_resume_stays_inside_travel() {
     );
     assert!(log.received.iter().any(|l| l == "G0Z0"), "{:?}", log.received);
 }
+
+/// Raises the hold flag when `at` lines have been answered, watches the controller settle at `Hold:0`
+/// and stay there (the same position over `still` reports), then raises the resume flag.
+struct HoldThenResume<'a> {
+    at: usize,
+    still: usize,
+    hold: &'a AtomicBool,
+    resume: &'a AtomicBool,
+    /// Positions reported at `Hold:0` before the resume.
+    held_at: Vec<[f64; 3]>,
+    done_when_held: Option<usize>,
+    resumed: bool,
+}
+impl Observer for HoldThenResume<'_> {
+    fn progress(&mut self, p: &Progress) {
+        if self.resumed {
+            return;
+        }
+        if p.lines_acked >= self.at && !self.hold.load(Ordering::SeqCst) && self.held_at.is_empty() {
+            self.hold.store(true, Ordering::SeqCst);
+        }
+        if matches!(p.state, Some(brdfmill::stream::protocol::MachineState::Hold { sub: 0 })) {
+            if let Some(pos) = p.position_mm {
+                self.held_at.push(pos);
+                self.done_when_held.get_or_insert(p.lines_done);
+            }
+            if self.held_at.len() >= self.still {
+                self.resumed = true;
+                self.resume.store(true, Ordering::SeqCst);
+            }
+        }
+    }
+}
+
+/// Interactive hold and resume (`SIGUSR1`/`SIGUSR2` in the CLI): the machine decelerates to `Hold:0` and
+/// stays put while held (no line completes meanwhile), the cycle start resumes it, and the job completes
+/// with every motion line executed exactly once by the controller's own record, on each build.
+#[test]
+fn a_users_hold_waits_in_place_and_the_resume_finishes_every_line_once() {
+    for (seed, build) in [
+        (11u64, Build::Stock),
+        (12, Build::LineNumbers),
+        (13, Build::PlannerBlocks),
+    ] {
+        let mut rng = Rng(seed);
+        let dir = tempfile::tempdir().unwrap();
+        let prog = program(dir.path(), "p.nc", &random_program(&mut rng, 16));
+        let baud = 1_000_000;
+        let emu = emulator_for(build, baud, 8.0, vec![]);
+        let journal = dir.path().join("p.journal.jsonl");
+        let (stop, hold, resume) = (AtomicBool::new(false), AtomicBool::new(false), AtomicBool::new(false));
+        let mut obs = HoldThenResume {
+            at: 8,
+            still: 6,
+            hold: &hold,
+            resume: &resume,
+            held_at: vec![],
+            done_when_held: None,
+            resumed: false,
+        };
+        let port = emu.port_path().expect("port up");
+        let mut link = SerialLink::open(&port, baud).unwrap();
+        let controls = session::Controls {
+            stop: &stop,
+            hold: &hold,
+            resume: &resume,
+        };
+        let outcome = session::run_with(
+            &mut link,
+            &prog,
+            &test_config(),
+            &journal,
+            Mode::Fresh,
+            &mut obs,
+            controls,
+        )
+        .unwrap();
+        let what = format!("seed {seed} on {build:?}");
+        assert!(matches!(outcome, Outcome::Completed(_)), "{what}: {outcome:?}");
+        assert!(
+            obs.resumed,
+            "{what}: the controller never reported Hold:0 after the hold"
+        );
+        let first = obs.held_at[0];
+        assert!(
+            obs.held_at
+                .iter()
+                .all(|p| (0..3).all(|i| (p[i] - first[i]).abs() < 1e-9)),
+            "{what}: the machine moved while held: {:?}",
+            obs.held_at
+        );
+        let log = emu.log();
+        assert!(
+            log.events.iter().all(|e| !e.contains("ALARM")),
+            "{what}: {:?}",
+            log.events
+        );
+        assert_eq!(log.rx_overflows, 0, "{what}");
+        assert_exactly_once(&prog, &log.executed, 1e-6, seed, false);
+        assert!(
+            Journal::load(&journal).unwrap().complete,
+            "{what}: the journal records completion"
+        );
+    }
+}

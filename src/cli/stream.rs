@@ -107,6 +107,15 @@ pub fn run(a: &Args) -> Result<()> {
         })
         .context("cannot install the Ctrl-C handler")?;
     }
+    let (hold, resume) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
+    signal_hook::flag::register(signal_hook::consts::SIGUSR1, Arc::clone(&hold))
+        .context("cannot install the SIGUSR1 (hold) handler")?;
+    signal_hook::flag::register(signal_hook::consts::SIGUSR2, Arc::clone(&resume))
+        .context("cannot install the SIGUSR2 (resume) handler")?;
+    eprintln!(
+        "streaming; hold: kill -USR1 {pid}, resume: kill -USR2 {pid}, stop: Ctrl-C",
+        pid = std::process::id()
+    );
     let bar = indicatif::ProgressBar::new(program.sendable().count() as u64);
     bar.set_style(
         indicatif::ProgressStyle::with_template("{bar:40} {pos}/{len} lines {msg}")
@@ -115,7 +124,12 @@ pub fn run(a: &Args) -> Result<()> {
     bar.enable_steady_tick(Duration::from_millis(250));
     let mut obs = Bar { bar };
     let mode = if a.resume { Mode::Resume } else { Mode::Fresh };
-    let outcome = session::run(&mut link, &program, &cfg, &journal, mode, &mut obs, &stop);
+    let controls = session::Controls {
+        stop: &stop,
+        hold: &hold,
+        resume: &resume,
+    };
+    let outcome = session::run_with(&mut link, &program, &cfg, &journal, mode, &mut obs, controls);
     obs.bar.finish_and_clear();
     match outcome? {
         Outcome::Completed(s) => {

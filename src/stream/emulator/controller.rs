@@ -46,6 +46,16 @@ pub struct Controller {
     pub(super) planner: VecDeque<Block>,
     pub(super) pos: [f64; 3],
     pub(super) parser_pos: [f64; 3],
+    /// Work coordinate systems G54–G59, machine mm (kept across resets: GRBL keeps them in EEPROM).
+    pub(super) coord: [[f64; 3]; 6],
+    /// The selected one (0: G54; a reset selects G54).
+    pub(super) coord_select: usize,
+    /// The G92 offset, mm (a reset clears it).
+    pub(super) g92: [f64; 3],
+    /// The G43.1 tool length offset along Z, mm (a reset clears it).
+    pub(super) tlo: f64,
+    /// The G28 and G30 stored positions, machine mm (kept across resets).
+    pub(super) stored: [[f64; 3]; 2],
     pub(super) modal: Modal,
     pub(super) out: Vec<u8>,
     pub(super) log: EmulatorLog,
@@ -82,6 +92,11 @@ impl Controller {
             planner: VecDeque::new(),
             pos: [0.0; 3],
             parser_pos: [0.0; 3],
+            coord: [[0.0; 3]; 6],
+            coord_select: 0,
+            g92: [0.0; 3],
+            tlo: 0.0,
+            stored: [[0.0; 3]; 2],
             modal: Modal::default(),
             out: Vec::new(),
             log: EmulatorLog::default(),
@@ -98,6 +113,18 @@ impl Controller {
         }
         c.banner();
         c
+    }
+
+    /// The work coordinate offset `WCO` of the coordinate system `select` with this G92 offset and tool
+    /// length offset: work position = machine position − WCO.
+    pub(super) fn wco_of(&self, select: usize, g92: [f64; 3], tlo: f64) -> [f64; 3] {
+        let c = self.coord[select];
+        [c[0] + g92[0], c[1] + g92[1], c[2] + g92[2] + tlo]
+    }
+
+    /// The current `WCO`.
+    pub(super) fn wco(&self) -> [f64; 3] {
+        self.wco_of(self.coord_select, self.g92, self.tlo)
     }
 
     /// Setting `$n` (0 when unknown).
@@ -229,6 +256,10 @@ impl Controller {
         self.reader.clear();
         self.critical = false;
         self.modal = Modal::default();
+        // GRBL's gc_init: G54 selected, the G92 and tool length offsets cleared (G54–G59, G28, G30 are kept)
+        self.coord_select = 0;
+        self.g92 = [0.0; 3];
+        self.tlo = 0.0;
         self.feed_override = 100;
         if moving {
             self.say("ALARM:3");

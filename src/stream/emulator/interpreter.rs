@@ -2,13 +2,16 @@
 //! [`program::words`](crate::stream::program::words), modal groups and GRBL's error codes, the modal state
 //! as a [`program::Modal`](crate::stream::program::Modal), targets in absolute or incremental mm or inches,
 //! arcs in G17, G18 and G19 (I J K offsets) checked for radius, soft limits, and the hand-over of the resulting motion to the
-//! planner. Words outside the subset answer `error:20` and are logged as not modelled.
+//! planner. Work coordinates as GRBL 1.1h keeps them: G54–G59 (set by G10 L2/L20), the G92 offset (G92.1
+//! clears it), the G43.1 tool length offset (G49 cancels it), G53 machine moves, G28/G30 (stored by
+//! G28.1/G30.1; with axis words through an intermediate point, and then only those axes). Words outside the
+//! subset answer `error:20` and are logged as not modelled.
 
 use std::collections::HashSet;
 
 use super::controller::{Controller, State};
 use super::line_reader::leading_line_number;
-use super::planner::{Block, BlockKind, Waiting};
+use super::planner::{Block, BlockKind, Moves, Waiting};
 use crate::stream::program::{self, Distance, Modal, MotionMode, Spindle, Units, MAX_LINE_NUMBER};
 
 /// The modal group of G90.1/G91.1 (GRBL's `MODAL_GROUP_G4`; the other ids here are GRBL's group numbers).
@@ -17,6 +20,23 @@ const GROUP_ARC_DISTANCE: u8 = 104;
 const GROUP_CUTTER_COMP: u8 = 107;
 /// G modal group 8 (tool length offset), numbered apart from the M groups.
 const GROUP_TOOL_LENGTH: u8 = 108;
+
+/// GRBL's non-modal commands of group 0 that the emulator models (G4 is `Parsed::dwell`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum NonModal {
+    /// G10 (with L2 or L20): set a coordinate system's offset.
+    SetCoord,
+    /// G28 (`0`) or G30 (`1`): go to the stored position.
+    GoStored(usize),
+    /// G28.1 (`0`) or G30.1 (`1`): store the current position.
+    SetStored(usize),
+    /// G53: this block's move in machine coordinates.
+    Machine,
+    /// G92: set the offset so the current position reads as the axis words.
+    SetOffset,
+    /// G92.1: clear it.
+    ClearOffset,
+}
 
 /// A block's words sorted by what they do, with the modal changes they make already applied to a copy of
 /// the parser's modal state (GRBL's steps 1–2: parse, and check each word on its own).
@@ -34,6 +54,13 @@ struct Parsed {
     axis_command: bool,
     /// M7, which only a build with `ENABLE_M7` accepts.
     mist_word: bool,
+    /// A group-0 command that uses or changes coordinates.
+    non_modal: Option<NonModal>,
+    /// G54–G59 (0–5).
+    coord_select: Option<usize>,
+    /// G43.1 (`Some(true)`) or G49 (`Some(false)`).
+    tool_length: Option<bool>,
+    l: Option<f64>,
     axis: [Option<f64>; 3],
     ijk: [Option<f64>; 3],
     f: Option<f64>,
@@ -74,7 +101,8 @@ impl Parsed {
     fn g_word(&mut self, v: f64, g: i32, mantissa: i32, m: &mut Modal) -> Result<(), u16> {
         match (g, mantissa) {
             (0..=3, 0) | (80, 0) => {
-                // Two of G0–G3 both want the axis words: GRBL's axis command conflict comes first.
+                // Two of G0–G3 (or one and G10/G28/G30/G92) want the axis words: GRBL's axis command
+                // conflict comes first.
                 if g <= 3 && self.axis_command {
                     return Err(24);
                 }
@@ -112,12 +140,46 @@ impl Parsed {
             // G91.1 (incremental I/J, GRBL's only arc mode) is accepted and does nothing; G90.1 is not.
             (91, 1) => self.group(GROUP_ARC_DISTANCE)?,
             (90, 1) => return Err(20),
-            (54, 0) => self.group(12)?,
-            // G40 is GRBL's only cutter-compensation mode and G49 cancels a tool-length offset the emulator
-            // never applies: accepted, as GRBL 1.1 accepts them (a machinist's safety line carries both)
+            (54..=59, 0) => {
+                self.group(12)?;
+                self.coord_select = Some((g - 54) as usize);
+            }
+            // G40 is GRBL's only cutter-compensation mode: accepted (a machinist's safety line carries it)
             (40, 0) => self.group(GROUP_CUTTER_COMP)?,
-            (49, 0) => self.group(GROUP_TOOL_LENGTH)?,
-            (10 | 28 | 30 | 53 | 92 | 38 | 43 | 61 | 93 | 55..=59, _) => {
+            (49, 0) | (43, 1) => {
+                self.group(GROUP_TOOL_LENGTH)?;
+                // GRBL counts G43.1 and G49 as axis commands (AXIS_COMMAND_TOOL_LENGTH_OFFSET)
+                if self.axis_command {
+                    return Err(24);
+                }
+                self.axis_command = true;
+                self.tool_length = Some(g == 43);
+            }
+            (43, _) => return Err(20),
+            (10, 0) | (28, 0 | 1) | (30, 0 | 1) | (53, 0) | (92, 0 | 1) => {
+                self.group(0)?;
+                let nm = match (g, mantissa) {
+                    (10, _) => NonModal::SetCoord,
+                    (28, 0) => NonModal::GoStored(0),
+                    (30, 0) => NonModal::GoStored(1),
+                    (28, _) => NonModal::SetStored(0),
+                    (30, _) => NonModal::SetStored(1),
+                    (53, _) => NonModal::Machine,
+                    (92, 0) => NonModal::SetOffset,
+                    _ => NonModal::ClearOffset,
+                };
+                // G10, G28/G30 and G92 take the axis words (GRBL's AXIS_COMMAND_NON_MODAL): with G0–G3 in
+                // the same block that is an axis command conflict
+                if matches!(nm, NonModal::SetCoord | NonModal::GoStored(_) | NonModal::SetOffset) {
+                    if self.axis_command {
+                        return Err(24);
+                    }
+                    self.axis_command = true;
+                }
+                self.non_modal = Some(nm);
+            }
+            (28 | 30 | 92, _) => return Err(20),
+            (38 | 61 | 93, _) => {
                 self.unmodelled = Some(format!("G{v}"));
             }
             (_, 0) => return Err(20),
@@ -184,10 +246,11 @@ impl Parsed {
                 }
             }
             'T' => {}
-            'R' | 'L' => self.unmodelled = Some(format!("{letter} word")),
+            'L' => self.l = Some(v),
+            'R' => self.unmodelled = Some(format!("{letter} word")),
             _ => return Err(20),
         }
-        if matches!(letter, 'F' | 'S' | 'P' | 'T' | 'N') && v < 0.0 {
+        if matches!(letter, 'F' | 'S' | 'P' | 'T' | 'N' | 'L') && v < 0.0 {
             return Err(4);
         }
         Ok(())
@@ -203,8 +266,42 @@ impl Parsed {
         if self.dwell && self.p.is_none() {
             return Err(28);
         }
-        if self.p.is_some() && !self.dwell {
+        match self.non_modal {
+            Some(NonModal::SetCoord) => {
+                // GRBL's order: no axis words 26, P or L missing 28, P beyond G59 29, L not 2 or 20: 20
+                if !has_axis {
+                    return Err(26);
+                }
+                let (Some(p), Some(l)) = (self.p, self.l) else {
+                    return Err(28);
+                };
+                if p.trunc() > 6.0 {
+                    return Err(29);
+                }
+                if l != 2.0 && l != 20.0 {
+                    return Err(20);
+                }
+            }
+            Some(NonModal::SetOffset) if !has_axis => return Err(26),
+            Some(NonModal::Machine) if !matches!(m.motion, MotionMode::Rapid | MotionMode::Linear) => return Err(30),
+            _ => {}
+        }
+        let g10 = self.non_modal == Some(NonModal::SetCoord);
+        if self.p.is_some() && !self.dwell && !g10 {
             return Err(36);
+        }
+        if self.l.is_some() && !g10 {
+            return Err(36);
+        }
+        match self.tool_length {
+            // G43.1 takes exactly the Z word (GRBL's TOOL_LENGTH_OFFSET_AXIS)
+            Some(true) if self.axis[2].is_none() || self.axis[0].is_some() || self.axis[1].is_some() => return Err(37),
+            Some(false) if has_axis => return Err(36),
+            _ => {}
+        }
+        // G10, G92 and G43.1 consume the axis words: no motion check applies to them
+        if g10 || self.non_modal == Some(NonModal::SetOffset) || self.tool_length.is_some() {
+            return Ok(());
         }
         let arc = has_axis && matches!(m.motion, MotionMode::ArcCw | MotionMode::ArcCcw);
         if self.ijk.iter().any(Option::is_some) && !arc {
@@ -251,28 +348,140 @@ impl Controller {
             m.motion = mm;
         }
         parsed.check(&m)?;
+        let select = parsed.coord_select.unwrap_or(self.coord_select);
+        let (coord, g92, stored, tlo) = self.offsets_after(&parsed, select, k);
+        // the axis words as a target: machine mm for G53, else work coordinates through the block's system
+        let wco = {
+            let c = coord[select];
+            [c[0] + g92[0], c[1] + g92[1], c[2] + g92[2] + tlo]
+        };
         let mut target = self.parser_pos;
         for (i, t) in target.iter_mut().enumerate() {
             if let Some(v) = parsed.axis[i] {
-                *t = if m.distance == Distance::Incremental {
+                *t = if parsed.non_modal == Some(NonModal::Machine) {
+                    v * k
+                } else if m.distance == Distance::Incremental {
                     *t + v * k
                 } else {
-                    v * k
+                    v * k + wco[i]
                 };
             }
         }
-        let block = match self.motion(&parsed, &m, target, k, text)? {
-            Motion::None => None,
-            Motion::Block(b) => Some(b),
-            Motion::SoftLimit => {
-                self.modal = m;
-                self.alarm(2);
-                return Ok(());
+        let consumed =
+            matches!(parsed.non_modal, Some(NonModal::SetCoord | NonModal::SetOffset)) || parsed.tool_length.is_some();
+        let moves = if consumed {
+            None
+        } else if let Some(NonModal::GoStored(w)) = parsed.non_modal {
+            match self.go_stored(&parsed, stored[w], target, leading_line_number(text).unwrap_or(0)) {
+                Some(mv) => mv,
+                None => {
+                    self.modal = m;
+                    self.alarm(2);
+                    return Ok(());
+                }
+            }
+        } else {
+            match self.motion(&parsed, &m, target, k, text)? {
+                Motion::None => None,
+                Motion::Block(b) => Some((b, None)),
+                Motion::SoftLimit => {
+                    self.modal = m;
+                    self.alarm(2);
+                    return Ok(());
+                }
             }
         };
+        let end = match (&moves, parsed.non_modal) {
+            (_, Some(NonModal::GoStored(w))) => Some(self.stored_target(&parsed, stored[w])),
+            (Some((b, _)), _) => Some(b.to),
+            (None, _) => None,
+        };
+        (self.coord, self.g92, self.stored, self.tlo, self.coord_select) = (coord, g92, stored, tlo, select);
+        if parsed.program_end {
+            self.coord_select = 0; // M2/M30 select G54 again
+        }
         self.modal = m;
-        self.hand_over(&parsed, &m, target, block);
+        self.hand_over(&parsed, &m, end.unwrap_or(self.parser_pos), moves);
         Ok(())
+    }
+
+    /// The coordinate data after this block's G10, G92/G92.1, G28.1/G30.1 and G43.1/G49, in GRBL's
+    /// relations `WPos = MPos − WCS − G92 − TLO` (L20: `WCS = MPos − G92 − TLO − value`; G92:
+    /// `G92 = MPos − WCS − TLO − value`); `(G54–G59, G92, G28/G30, TLO)`.
+    #[allow(clippy::type_complexity)]
+    fn offsets_after(&self, parsed: &Parsed, select: usize, k: f64) -> ([[f64; 3]; 6], [f64; 3], [[f64; 3]; 2], f64) {
+        let (mut coord, mut g92, mut stored, mut tlo) = (self.coord, self.g92, self.stored, self.tlo);
+        let z_tlo = |i: usize| if i == 2 { self.tlo } else { 0.0 };
+        let pos = self.parser_pos;
+        match parsed.non_modal {
+            Some(NonModal::SetCoord) => {
+                let p = parsed.p.unwrap_or(0.0).trunc() as usize;
+                let idx = if p > 0 { p - 1 } else { select };
+                for i in 0..3 {
+                    if let Some(v) = parsed.axis[i] {
+                        coord[idx][i] = if parsed.l == Some(20.0) {
+                            pos[i] - self.g92[i] - z_tlo(i) - v * k
+                        } else {
+                            v * k
+                        };
+                    }
+                }
+            }
+            Some(NonModal::SetOffset) => {
+                for i in 0..3 {
+                    if let Some(v) = parsed.axis[i] {
+                        g92[i] = pos[i] - self.coord[select][i] - z_tlo(i) - v * k;
+                    }
+                }
+            }
+            Some(NonModal::ClearOffset) => g92 = [0.0; 3],
+            Some(NonModal::SetStored(w)) => stored[w] = pos,
+            _ => {}
+        }
+        match parsed.tool_length {
+            Some(true) => tlo = parsed.axis[2].unwrap_or(0.0) * k,
+            Some(false) => tlo = 0.0,
+            None => {}
+        }
+        (coord, g92, stored, tlo)
+    }
+
+    /// Where G28/G30 ends: the stored position, only on the axes the block names when it names any
+    /// (GRBL 1.1: "move only the axes specified in secondary move").
+    fn stored_target(&self, parsed: &Parsed, stored: [f64; 3]) -> [f64; 3] {
+        let mut home = stored;
+        if parsed.has_axis() {
+            for (i, h) in home.iter_mut().enumerate() {
+                if parsed.axis[i].is_none() {
+                    *h = self.parser_pos[i];
+                }
+            }
+        }
+        home
+    }
+
+    /// G28/G30's rapids: to the intermediate point (the axis words, if any) and on to the stored position;
+    /// `None` when one of them leaves the soft limits (`ALARM:2`), `Some(None)` when neither moves.
+    fn go_stored(&mut self, parsed: &Parsed, stored: [f64; 3], via: [f64; 3], line: u32) -> Option<Option<Moves>> {
+        let home = self.stored_target(parsed, stored);
+        if self.setting(20) == 1.0 {
+            for t in [via, home] {
+                if (0..3).any(|i| t[i] > 0.0 || t[i] < -self.setting(130 + i as u16)) {
+                    return None;
+                }
+            }
+        }
+        let start = self.parser_pos;
+        let first = self.block(BlockKind::Rapid, via, 0.0, line);
+        self.parser_pos = via;
+        let second = self.block(BlockKind::Rapid, home, 0.0, line);
+        self.parser_pos = start;
+        let line = |b: Block| (b.duration_s > 0.0).then_some(b);
+        Some(match (line(first), line(second)) {
+            (Some(a), Some(b)) => Some((a, Some(Box::new(b)))),
+            (Some(a), None) | (None, Some(a)) => Some((a, None)),
+            (None, None) => None,
+        })
     }
 
     /// The block's move to `target` (machine mm; `k` converts the block's units to mm), checked.
@@ -338,7 +547,7 @@ impl Controller {
     /// What happens to a valid block: in check mode only its `ok`; spindle, coolant, dwell and program
     /// end wait for the planner to empty, then their motion is planned; plain motion waits for planner
     /// space. The parser moves on to `target` at once.
-    fn hand_over(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], block: Option<Block>) {
+    fn hand_over(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], block: Option<Moves>) {
         self.parser_pos = target;
         if self.state == State::Check {
             self.say("ok");

@@ -11,11 +11,12 @@
 //! - [`Emulator`]: runs a controller on a pseudo-terminal in its own thread, pacing bytes both ways at the
 //!   configured baud (10 bits per byte, 8N1) and running motion `time_scale` times faster than real time.
 //!
-//! Modelled G-code: G0 G1 G2 G3 (offset form `I J K` in the G17, G18 or G19 plane) G4 G17 G18 G19 G20 G21 G54 G80 G90 G91 G94,
-//! M0 M1 M2 M30 M3 M4 M5 M7 M8 M9, F S T N P words. Not modelled (answered `error:20`, and logged as such):
-//! G10 G28 G30 G53 G92 G38.x G43.1 G49 G61 G93 G55–G59, arcs in R form; `$J=` and `$SLP`
-//! (answered `error:3`). Motion has no acceleration: a block takes `length / feed` and a feed hold stops
-//! at once, where a real GRBL decelerates over up to `v²/2a`.
+//! Modelled G-code: G0 G1 G2 G3 (offset form `I J K` in the G17, G18 or G19 plane) G4 G17 G18 G19 G20 G21 G40
+//! G80 G90 G91 G91.1 G94, work coordinates (G54–G59, G10 L2/L20, G92/G92.1, G43.1/G49, G53, G28/G28.1,
+//! G30/G30.1: see `interpreter`), M0 M1 M2 M30 M3 M4 M5 M7 M8 M9, F S T N P L words. Not modelled
+//! (answered `error:20`, and logged as such): G38.x probing, G61, G93 inverse time, arcs in R form; `$J=`
+//! and `$SLP` (answered `error:3`). Blocks cruise at their feed (no acceleration between them); a feed hold
+//! decelerates at `$120`–`$122` along the planned path.
 //!
 //! **Faults** ([`Fault`]) fire once, on the first line carrying line number `N` (or the `k`-th line
 //! received): `error` answers `error:code` instead of running the line; `alarm` stops motion at once and

@@ -80,14 +80,18 @@ fn arc_sweep(from: [f64; 3], to: [f64; 3], c: [f64; 2], cw: bool, [a, b]: [usize
 /// What a parsed line waits for before its `ok`.
 #[derive(Debug, Clone)]
 pub(super) enum Waiting {
-    /// A motion block waiting for planner space.
-    Plan(Block),
+    /// A line's motion waiting for planner space.
+    Plan(Moves),
     /// A spindle/coolant change or dwell waiting for the planner to empty (GRBL synchronises them), then
     /// the block's own motion, if any.
-    Sync { dwell_s: f64, then: Option<Block> },
+    Sync { dwell_s: f64, then: Option<Moves> },
     /// Dwelling until this simulated time, then the block's motion.
-    Dwell { until_s: f64, then: Option<Block> },
+    Dwell { until_s: f64, then: Option<Moves> },
 }
+
+/// A line's motion: one planner block, or two (G28/G30 through an intermediate point: the move home
+/// follows the first).
+pub(super) type Moves = (Block, Option<Box<Block>>);
 
 /// What serving the waiting line came to.
 pub(super) enum Served {
@@ -214,13 +218,17 @@ impl Controller {
             return Served::Done;
         };
         match w {
-            Waiting::Plan(b) => {
+            Waiting::Plan((b, next)) => {
                 if self.planner_full() {
                     self.start_cycle();
-                    self.waiting = Some(Waiting::Plan(b));
+                    self.waiting = Some(Waiting::Plan((b, next)));
                     return Served::Blocked;
                 }
                 self.planner.push_back(b);
+                if let Some(n) = next {
+                    self.waiting = Some(Waiting::Plan((*n, None)));
+                    return Served::Again;
+                }
                 self.say("ok");
             }
             Waiting::Sync { dwell_s, then } => {

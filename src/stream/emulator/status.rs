@@ -23,7 +23,12 @@ impl Controller {
 
     pub(super) fn status_report(&mut self) {
         let mask = self.setting(10) as u32;
-        let p = self.pos;
+        let wco = self.wco();
+        let p = if mask & 1 == 1 {
+            self.pos
+        } else {
+            [self.pos[0] - wco[0], self.pos[1] - wco[1], self.pos[2] - wco[2]]
+        };
         let mut s = format!("<{}|", self.state_word());
         s += &format!(
             "{}:{:.3},{:.3},{:.3}",
@@ -65,7 +70,7 @@ impl Controller {
         if self.wco_counter == 0 {
             self.wco_counter = if self.state == State::Run { 29 } else { 9 };
             self.ovr_pending = true;
-            s += "|WCO:0.000,0.000,0.000";
+            s += &format!("|WCO:{:.3},{:.3},{:.3}", wco[0], wco[1], wco[2]);
         } else {
             self.wco_counter -= 1;
             if std::mem::take(&mut self.ovr_pending) {

@@ -111,10 +111,18 @@ impl Controller {
             "$" => self.say("[HLP:$$ $# $G $I $N $x=val $Nx=line $J=line $SLP $C $X $H ~ ! ? ctrl-x]"),
             "$$" => self.report_settings(),
             "$#" => {
-                for g in ["G54", "G55", "G56", "G57", "G58", "G59", "G28", "G30", "G92"] {
-                    self.say(&format!("[{g}:0.000,0.000,0.000]"));
+                let rows: Vec<(String, [f64; 3])> = (0..6)
+                    .map(|k| (format!("G{}", 54 + k), self.coord[k]))
+                    .chain([
+                        ("G28".to_string(), self.stored[0]),
+                        ("G30".to_string(), self.stored[1]),
+                        ("G92".to_string(), self.g92),
+                    ])
+                    .collect();
+                for (g, v) in rows {
+                    self.say(&format!("[{g}:{:.3},{:.3},{:.3}]", v[0], v[1], v[2]));
                 }
-                self.say("[TLO:0.000]");
+                self.say(&format!("[TLO:{:.3}]", self.tlo));
                 self.say("[PRB:0.000,0.000,0.000:0]");
             }
             "$G" => self.report_modes(),
@@ -184,8 +192,9 @@ impl Controller {
     fn report_modes(&mut self) {
         let m: Modal = self.modal;
         self.say(&format!(
-            "[GC:G{} G54 G{} G{} G{} G94 M{} M9 T0 F{} S{}]",
+            "[GC:G{} G{} G{} G{} G{} G94 M{} M9 T0 F{} S{}]",
             motion_number(m.motion),
+            54 + self.coord_select,
             m.plane,
             if m.units == Units::Inch { 20 } else { 21 },
             if m.distance == Distance::Incremental { 91 } else { 90 },

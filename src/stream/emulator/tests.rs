@@ -219,3 +219,96 @@ fn arcs_in_every_plane_follow_grbl() {
     assert_eq!(send(&mut c, "G19G3Y2.01Z0J1K0\n"), "error:33\r\n");
     assert_eq!(send(&mut c, "G19G3Y2.004Z0J1K0\n"), "ok\r\n", "within 0.005 mm");
 }
+
+/// Run whatever was planned to its end, then the machine position from a status report.
+fn settle_mpos(c: &mut Controller) -> [f64; 3] {
+    c.advance(1000.0);
+    let s = send(c, "?");
+    let m = s.split("MPos:").nth(1).expect("MPos").split('|').next().unwrap();
+    let v: Vec<f64> = m.split(',').map(|t| t.parse().unwrap()).collect();
+    [v[0], v[1], v[2]]
+}
+
+fn table(c: &mut Controller, name: &str) -> String {
+    let s = send(c, "$#\n");
+    let row = s
+        .lines()
+        .find(|l| l.starts_with(&format!("[{name}:")))
+        .unwrap_or_else(|| panic!("{s}"));
+    row.trim_start_matches(&format!("[{name}:"))
+        .trim_end_matches(']')
+        .to_string()
+}
+
+/// Work coordinates as GRBL 1.1h keeps them, against its relation `WPos = MPos − WCS − G92 − TLO` worked by
+/// hand: G10 L2/L20, G54–G59, G92/G92.1, G43.1/G49, G53, G28/G28.1 (all axes, and only the named ones), the
+/// error codes of each, and what a reset keeps (G54–G59, G28) and clears (selection, G92, TLO).
+#[test]
+fn work_coordinates_follow_grbl() {
+    let mut c = ctl();
+    assert_eq!(send(&mut c, "G10L2P2X10Y20Z-5\n"), "ok\r\n");
+    assert_eq!(table(&mut c, "G55"), "10.000,20.000,-5.000");
+    assert_eq!(send(&mut c, "G55G0X1Y2Z3\n"), "ok\r\n");
+    assert_eq!(settle_mpos(&mut c), [11.0, 22.0, -2.0]);
+    // G92 so that here reads X0 Y0: G92 = MPos − WCS − value
+    assert_eq!(send(&mut c, "G92X0Y0\n"), "ok\r\n");
+    assert_eq!(table(&mut c, "G92"), "1.000,2.000,0.000");
+    // L20 on P1 (G54) so that here reads X5 in it: WCS = MPos − G92 − TLO − value = 11 − 1 − 5
+    assert_eq!(send(&mut c, "G10L20P1X5\n"), "ok\r\n");
+    assert_eq!(table(&mut c, "G54"), "5.000,0.000,0.000");
+    assert_eq!(send(&mut c, "G43.1Z2\n"), "ok\r\n");
+    assert_eq!(table(&mut c, "TLO"), "2.000");
+    // in G55 with G92 (1, 2, 0) and TLO 2: X0 Y0 Z0 is machine (11, 22, −3)
+    assert_eq!(send(&mut c, "G1X0Y0Z0F600\n"), "ok\r\n");
+    assert_eq!(settle_mpos(&mut c), [11.0, 22.0, -3.0]);
+    // G53 moves in machine coordinates whatever the offsets; G91 does not apply to it
+    assert_eq!(send(&mut c, "G91G53G0X3Y4Z0\n"), "ok\r\n");
+    assert_eq!(settle_mpos(&mut c), [3.0, 4.0, 0.0]);
+    assert_eq!(send(&mut c, "G90G28.1\n"), "ok\r\n");
+    assert_eq!(table(&mut c, "G28"), "3.000,4.000,0.000");
+    assert_eq!(send(&mut c, "G53G0X0Y0Z-1\n"), "ok\r\n");
+    assert_eq!(send(&mut c, "G28\n"), "ok\r\n");
+    assert_eq!(settle_mpos(&mut c), [3.0, 4.0, 0.0], "G28 alone: every axis home");
+    assert_eq!(send(&mut c, "G53G0X0Y0Z-1\n"), "ok\r\n");
+    // through work X = 1 (machine 1 + 10 + 1 = 12), then home on X only
+    assert_eq!(send(&mut c, "G28X1\n"), "ok\r\n");
+    assert_eq!(settle_mpos(&mut c), [3.0, 0.0, -1.0], "G28 X: only X goes home");
+    assert_eq!(send(&mut c, "G92.1\n"), "ok\r\n");
+    assert_eq!(table(&mut c, "G92"), "0.000,0.000,0.000");
+    assert_eq!(send(&mut c, "G49\n"), "ok\r\n");
+    assert_eq!(table(&mut c, "TLO"), "0.000");
+    // GRBL's error codes
+    for (line, code) in [
+        ("G10L2P1\n", 26),     // no axis words
+        ("G10L2X1\n", 28),     // P missing
+        ("G10P1X1\n", 28),     // L missing
+        ("G10L2P7X1\n", 29),   // beyond G59
+        ("G10L3P1X1\n", 20),   // L neither 2 nor 20
+        ("G92\n", 26),         // no axis words
+        ("G92G1X1F100\n", 24), // two commands want the axis words
+        ("G1G92X1F100\n", 24),
+        ("G53G2X1I1F100\n", 30), // G53 needs G0 or G1
+        ("G43.1X1\n", 37),       // G43.1 takes exactly Z
+        ("G43.1\n", 37),
+        ("G43Z1\n", 20),
+        ("G49X1\n", 36),
+        ("G1X1L2F100\n", 36), // L without G10
+        ("G92.2X1\n", 20),
+        ("G4G10L2P1X1\n", 21), // two group-0 commands
+    ] {
+        assert_eq!(send(&mut c, line), format!("error:{code}\r\n"), "{}", line.trim());
+    }
+    // a reset keeps G54–G59 and G28, selects G54 and clears G92 and TLO
+    assert_eq!(
+        send(&mut c, "G55G92X0G43.1Z1\n"),
+        "error:24\r\n",
+        "G92 and G43.1 both want the axis words"
+    );
+    assert_eq!(send(&mut c, "G55\n"), "ok\r\n");
+    assert_eq!(send(&mut c, "G92X0\n"), "ok\r\n");
+    send(&mut c, "\x18");
+    assert_eq!(table(&mut c, "G55"), "10.000,20.000,-5.000");
+    assert_eq!(table(&mut c, "G28"), "3.000,4.000,0.000");
+    assert_eq!(table(&mut c, "G92"), "0.000,0.000,0.000");
+    assert!(send(&mut c, "$G\n").contains(" G54 "), "a reset selects G54");
+}

@@ -96,6 +96,11 @@ struct Session<'a> {
     cfg: &'a Config,
     observer: &'a mut dyn Observer,
     stop: &'a AtomicBool,
+    /// Interactive hold and resume requests ([`Controls`]), taken when acted on.
+    hold_request: &'a AtomicBool,
+    resume_request: &'a AtomicBool,
+    /// A feed hold asked for by the user is in force (cleared by the resume request).
+    user_hold: bool,
     journal: Option<Journal>,
     rbuf: Vec<u8>,
     saw: String,
@@ -135,6 +140,20 @@ struct Session<'a> {
     origin: Option<[f64; 3]>,
 }
 
+/// What the user can ask of a running stream, each a flag raised from outside (a signal handler) and taken
+/// when the streamer acts on it.
+#[derive(Clone, Copy, Debug)]
+pub struct Controls<'a> {
+    /// Stop (Ctrl-C): feed hold, then a reset once motion has stopped; raised again while waiting for the
+    /// hold, a reset at once.
+    pub stop: &'a AtomicBool,
+    /// Feed hold, and keep streaming into the controller's buffer (`SIGUSR1`): the machine decelerates
+    /// along its path and waits, spindle on, at `Hold:0`; nothing is lost or re-sent.
+    pub hold: &'a AtomicBool,
+    /// Cycle start after a user's hold (`SIGUSR2`).
+    pub resume: &'a AtomicBool,
+}
+
 /// Stream `program` over `link`, journaling to `journal_path`. `stop` is raised by Ctrl-C: the run then
 /// holds, stops safely and returns [`Outcome::Stopped`].
 pub fn run(
@@ -145,6 +164,25 @@ pub fn run(
     mode: Mode,
     observer: &mut dyn Observer,
     stop: &AtomicBool,
+) -> Result<Outcome, StreamError> {
+    let (hold, resume) = (AtomicBool::new(false), AtomicBool::new(false));
+    let controls = Controls {
+        stop,
+        hold: &hold,
+        resume: &resume,
+    };
+    run_with(link, program, cfg, journal_path, mode, observer, controls)
+}
+
+/// [`run`] with interactive hold and resume ([`Controls`]).
+pub fn run_with(
+    link: &mut dyn Link,
+    program: &Program,
+    cfg: &Config,
+    journal_path: &Path,
+    mode: Mode,
+    observer: &mut dyn Observer,
+    controls: Controls<'_>,
 ) -> Result<Outcome, StreamError> {
     let resume_state = match mode {
         Mode::Resume => Some(resume::load_state(program, cfg, journal_path)?),
@@ -158,7 +196,7 @@ pub fn run(
             None
         }
     };
-    let mut s = Session::new(link, program, cfg, observer, stop);
+    let mut s = Session::new(link, program, cfg, observer, controls);
     let info = s.handshake()?;
     s.counter = Counter::new(info.rx_bytes);
     s.line_numbers = info.line_numbers && cfg.number_lines;
@@ -174,7 +212,7 @@ impl<'a> Session<'a> {
         program: &'a Program,
         cfg: &'a Config,
         observer: &'a mut dyn Observer,
-        stop: &'a AtomicBool,
+        controls: Controls<'a>,
     ) -> Session<'a> {
         let now = Instant::now();
         Session {
@@ -182,7 +220,10 @@ impl<'a> Session<'a> {
             program,
             cfg,
             observer,
-            stop,
+            stop: controls.stop,
+            hold_request: controls.hold,
+            resume_request: controls.resume,
+            user_hold: false,
             journal: None,
             rbuf: Vec::new(),
             saw: String::new(),

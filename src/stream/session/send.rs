@@ -8,7 +8,7 @@ use std::time::{Duration, Instant};
 
 use super::{Fault, Outcome, Outgoing, Session, StreamError, Tag};
 use crate::stream::journal::Record;
-use crate::stream::protocol::{error_text, parse_response, Decision, Response};
+use crate::stream::protocol::{error_text, parse_response, Decision, Realtime, Response};
 
 impl Session<'_> {
     /// Stream the queue. Returns when everything executed or after a safe stop.
@@ -38,6 +38,7 @@ impl Session<'_> {
             if self.stop.swap(false, Ordering::SeqCst) {
                 return Err(Fault::User);
             }
+            self.interactive_hold()?;
             self.maybe_poll()?;
             self.send_what_fits(q)?;
             self.all_answered = q.is_empty() && self.counter.outstanding() == 0;
@@ -65,6 +66,25 @@ impl Session<'_> {
                 )));
             }
         }
+    }
+
+    /// Act on the user's hold and resume requests: a feed hold (`!`) decelerates the machine along its path
+    /// to `Hold:0`, where it waits with the spindle on; streaming goes on into the controller's buffer, and
+    /// what executed is still read from the status reports. A cycle start (`~`) resumes. A resume without a
+    /// hold of the user's is ignored (a hold from the machine's own button stays the machinist's).
+    fn interactive_hold(&mut self) -> Result<(), Fault> {
+        if self.hold_request.swap(false, Ordering::SeqCst) && !self.user_hold {
+            self.write(&[Realtime::FeedHold.byte()])?;
+            self.user_hold = true;
+            self.observer
+                .note("feed hold: the machine decelerates and waits (SIGUSR2 resumes, Ctrl-C stops the job)");
+        }
+        if self.resume_request.swap(false, Ordering::SeqCst) && self.user_hold {
+            self.write(&[Realtime::CycleStart.byte()])?;
+            self.user_hold = false;
+            self.observer.note("cycle start: resuming");
+        }
+        Ok(())
     }
 
     /// Send queued lines while the receive buffer has room for them (a line sent alone also waits for an
