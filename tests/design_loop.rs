@@ -43,3 +43,59 @@ fn the_loop_brings_the_milled_variance_closer_than_the_uncorrected_design() {
         "milled variance ratio with the loop {r1:?} (round {chosen} chosen) is no closer than without {r0:?}"
     );
 }
+
+/// The candidate arrangements: as many as asked, the job's seed first, and round 1 is the one whose
+/// uncorrected model scores best. That ranking is the model's; the simulated G-code of the chosen candidate
+/// and of the worst-ranked one (each run alone from its seed) must rank the same way.
+#[test]
+fn the_chosen_arrangement_is_the_one_the_ball_spoils_least() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let run = |extra: &[String]| {
+        let mut set = vec![
+            "facets.facets_x=6".to_string(),
+            "facets.facets_y=6".to_string(),
+            "toolpath.area_mm=[7.2, 7.2]".to_string(),
+            "design.rounds=1".to_string(),
+        ];
+        set.extend_from_slice(extra);
+        let ready = Job::load_with(&root.join("examples/ward-brushed.toml"), &set).unwrap();
+        let out = tempfile::tempdir().unwrap();
+        job::run(&ready, out.path(), Stage::Verify, &mut |_| {})
+            .unwrap()
+            .metrics
+            .unwrap()
+    };
+    let m = run(&["design.arrangements=3".to_string()]);
+    assert_eq!(m.arrangements.len(), 3);
+    assert_eq!(m.arrangements[0].seed, 1, "the job's seed is the first candidate");
+    let seeds: std::collections::BTreeSet<u64> = m.arrangements.iter().map(|r| r.seed).collect();
+    assert_eq!(seeds.len(), 3, "distinct seeds");
+    let best = m
+        .arrangements
+        .iter()
+        .min_by(|a, b| a.score.total_cmp(&b.score))
+        .unwrap();
+    let worst = m
+        .arrangements
+        .iter()
+        .max_by(|a, b| a.score.total_cmp(&b.score))
+        .unwrap();
+    assert_eq!(m.rounds[0].seed, best.seed, "round 1 is the best-scoring candidate");
+    let err = |m: &brdfmill::verify::Metrics| {
+        let r = m.milled.cov_ratio;
+        (r[0] - 1.0).abs().max((r[1] - 1.0).abs())
+    };
+    let alone = |seed: u64| run(&[format!("facets.seed={seed}"), "design.arrangements=1".to_string()]);
+    let (chosen, rejected) = (alone(best.seed), alone(worst.seed));
+    assert_eq!(chosen.rounds[0].seed, best.seed);
+    eprintln!(
+        "milled variance ratio: chosen (seed {}) {:?}, worst-ranked (seed {}) {:?}",
+        best.seed, chosen.milled.cov_ratio, worst.seed, rejected.milled.cov_ratio
+    );
+    assert!(
+        err(&chosen) <= err(&rejected),
+        "the chosen arrangement's milled error {} exceeds the worst-ranked one's {}",
+        err(&chosen),
+        err(&rejected)
+    );
+}

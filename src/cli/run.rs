@@ -51,10 +51,13 @@ pub fn run(a: &Args) -> Result<i32> {
     let style = ProgressStyle::with_template("{spinner} {prefix:>9}  {msg} {elapsed}").unwrap();
     let mut bar: Option<ProgressBar> = None;
     let mut progress = |event: Progress| match event {
-        Progress::Round(round) => {
+        Progress::Arrangement(round) | Progress::Round(round) => {
+            let what = match event {
+                Progress::Arrangement(_) => format!("seed {:>20}", round.seed),
+                _ => format!("round {}", round.round),
+            };
             let line = format!(
-                    "   round {}  as-milled model: corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}], relief {:.3} mm, steps {:.1} µm rms",
-                    round.round,
+                    "   {what}  as-milled model: corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}], relief {:.3} mm, steps {:.1} µm rms",
                     round.ndf_corr,
                     round.ndf_l1,
                     round.cov_ratio[0],

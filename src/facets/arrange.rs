@@ -95,6 +95,8 @@ pub struct Arrangement {
     pub relief_weight: f64,
     row_p: Vec<f64>,
     col_q: Vec<f64>,
+    /// Cyclic neighbours of each position: right, up, left, down (no division in the annealer's loop).
+    nbr: Vec<[u32; 4]>,
     /// ψ, ζ of S and R, present only when a weight is non-zero.
     terms: Option<Box<StepTerms>>,
 }
@@ -114,6 +116,18 @@ impl Arrangement {
             relief_weight: 0.0,
             row_p: vec![0.0; h],
             col_q: vec![0.0; w],
+            nbr: (0..w * h)
+                .map(|k| {
+                    let (x, y) = (k % w, k / w);
+                    [
+                        y * w + (x + 1) % w,
+                        ((y + 1) % h) * w + x,
+                        y * w + (x + w - 1) % w,
+                        ((y + h - 1) % h) * w + x,
+                    ]
+                    .map(|v| v as u32)
+                })
+                .collect(),
             terms: None,
         };
         a.recompute_sums();
@@ -165,24 +179,22 @@ impl Arrangement {
 
     #[inline]
     fn right(&self, k: usize) -> usize {
-        let (x, y) = (k % self.w, k / self.w);
-        y * self.w + (x + 1) % self.w
+        self.nbr[k][0] as usize
     }
 
     #[inline]
     fn up(&self, k: usize) -> usize {
-        (k + self.w) % (self.w * self.h)
+        self.nbr[k][1] as usize
     }
 
     #[inline]
     fn left(&self, k: usize) -> usize {
-        let (x, y) = (k % self.w, k / self.w);
-        y * self.w + (x + self.w - 1) % self.w
+        self.nbr[k][2] as usize
     }
 
     #[inline]
     fn down(&self, k: usize) -> usize {
-        (k + self.w * self.h - self.w) % (self.w * self.h)
+        self.nbr[k][3] as usize
     }
 
     /// (C, V-count) of the x-edge from `k` to its right neighbour.

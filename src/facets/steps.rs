@@ -145,6 +145,8 @@ struct Quadratic {
     m: [Vec<f64>; 3],
     /// `f = T x`.
     field: Vec<f64>,
+    /// Per facet and slope component, the field indices its stencil reads (`stencil[α].len()` per facet).
+    taps: [Vec<u32>; 2],
 }
 
 impl Quadratic {
@@ -164,6 +166,16 @@ impl Quadratic {
             shifted_sum(&kern[1], stencil[0], -1),
             shifted_sum(&kern[1], stencil[1], -1),
         ];
+        let taps = [0, 1].map(|alpha: usize| {
+            (0..n)
+                .flat_map(|k| {
+                    let (x, y) = (k % w, k / w);
+                    stencil[alpha]
+                        .iter()
+                        .map(move |&(dx, dy, _)| (wrap(y, dy, h) * w + wrap(x, dx, w)) as u32)
+                })
+                .collect()
+        });
         Self {
             w,
             h,
@@ -171,6 +183,7 @@ impl Quadratic {
             kern,
             m,
             field: Vec::new(),
+            taps,
         }
     }
 
@@ -184,10 +197,11 @@ impl Quadratic {
     /// `u_α(k) = Σ_s σ_α(s) f(k + s)`.
     #[inline]
     fn drive(&self, alpha: usize, (x, y): (usize, usize)) -> f64 {
-        let (w, h) = (self.w, self.h);
-        self.stencil[alpha]
-            .iter()
-            .map(|&(dx, dy, v)| v * self.field[wrap(y, dy, h) * w + wrap(x, dx, w)])
+        let st = self.stencil[alpha];
+        let k = (y * self.w + x) * st.len();
+        st.iter()
+            .zip(&self.taps[alpha][k..k + st.len()])
+            .map(|(&(_, _, v), &i)| v * self.field[i as usize])
             .sum()
     }
 

@@ -64,6 +64,8 @@ pub enum Progress<'a> {
     Started(Stage),
     /// A stage has written its artifacts.
     Finished(Stage),
+    /// The design loop modelled a candidate arrangement (before the first round).
+    Arrangement(&'a Round),
     /// The design loop finished a round.
     Round(&'a Round),
 }
@@ -86,6 +88,8 @@ pub struct Outcome {
     pub report: Option<PathBuf>,
     /// The design loop's rounds and the one chosen (index), empty before the facets.
     pub rounds: (Vec<Round>, usize),
+    /// The candidate arrangements' first rounds (the best became round 1), empty before the facets.
+    pub arrangements: Vec<Round>,
     /// The steepest facet, degrees, and where it came from.
     pub slope_cap: (f64, String),
     /// What the run noticed about its input that the user should know (e.g. target mass beyond the NDF
@@ -200,6 +204,7 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
         timings: vec![],
         report: None,
         rounds: (vec![], 0),
+        arrangements: vec![],
         slope_cap: (job.facets.max_slope_deg, ready.slope_cap_from.clone()),
         warnings: vec![],
     };
@@ -233,11 +238,15 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
             corr_min: tol.ndf_corr_min,
             l1_max: tol.ndf_l1_max,
         },
-        &mut |round| progress(Progress::Round(round)),
+        &mut |p| match p {
+            crate::design::Progress::Arrangement(r) => progress(Progress::Arrangement(r)),
+            crate::design::Progress::Round(r) => progress(Progress::Round(r)),
+        },
     )
     .map_err(stage_err("facets"))?;
     let (tile, tile_figure) = facets_stage(&nd.ndf, d.tile, &mut o)?;
     outcome.rounds = (d.rounds, d.chosen);
+    outcome.arrangements = d.arrangements;
     step(&mut *progress, Stage::Facets, &mut timings, false);
     write_state(&mut o, &job.name, &timings, "running")?;
     let (lo, hi) = tile.heightfield.range();
@@ -291,6 +300,7 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
             raster_angle_deg: job.toolpath.angle_deg,
             cone_deg: job.facets.max_slope_deg,
             rounds: &outcome.rounds.0,
+            arrangements: &outcome.arrangements,
         },
     )
     .map_err(stage_err("verify"))?;

@@ -27,6 +27,29 @@ pub struct Findings<'a> {
     pub facets: usize,
     /// The design loop's slope scales of the chosen tile (`[1, 1]`: uncorrected).
     pub scale: [f64; 2],
+    /// How far the target's observed distribution stays above half its peak across the finishing passes
+    /// (the mean of both sides), in slope units ([`half_max_extent`]).
+    pub target_peak_halfwidth: f64,
+}
+
+/// How far from its peak a density stays above half the peak along the direction `(dp, dq)` (unit), the
+/// mean of both sides, in slope units: walked in steps of a quarter cell on the bilinear density.
+#[must_use]
+pub fn half_max_extent(g: &crate::slope::SlopeGrid, (dp, dq): (f64, f64)) -> f64 {
+    let d = &g.domain;
+    let k = (0..g.density.len()).fold(0, |b, k| if g.density[k] > g.density[b] { k } else { b });
+    let (p0, q0) = (d.p_at(k % d.nx), d.q_at(k / d.nx));
+    let peak = g.sample(p0, q0);
+    let step = 0.25 * d.dp().min(d.dq());
+    let reach = (d.p_max - d.p_min).max(d.q_max - d.q_min);
+    let side = |sign: f64| {
+        let mut t = 0.0;
+        while t < reach && g.sample(p0 + sign * t * dp, q0 + sign * t * dq) > 0.5 * peak {
+            t += step;
+        }
+        t
+    };
+    0.5 * (side(1.0) + side(-1.0))
 }
 
 /// One line per shortfall, in the order of the checks.
@@ -60,13 +83,28 @@ pub fn shortfall(f: &Findings) -> Vec<String> {
             milled.ndf_l1, tol.ndf_l1_max
         ));
     }
+    // the scallops' lobe spans t_max = (s/2)/√(r² − s²/4) across the passes (DESIGN.md §2)
+    let (r, s) = (f.tool_radius_mm, f.stepover_mm);
+    let t_max = 0.5 * s / (r * r - 0.25 * s * s).max(1e-12).sqrt();
+    let t_peak = f.target_peak_halfwidth;
+    if (milled.ndf_corr < tol.ndf_corr_min || milled.ndf_l1 > tol.ndf_l1_max) && t_peak > 0.0 && t_max > t_peak {
+        // the scallop height whose lobe spans ±t_peak: s/2 = r·t/√(1 + t²), h = r − √(r² − s²/4)
+        let half_s = r * t_peak / (1.0 + t_peak * t_peak).sqrt();
+        let h_um = 1000.0 * (r - (r * r - half_s * half_s).sqrt());
+        notes.push(format!(
+            "The target's peak is sharper than the scallops' lobe: across the passes it stays above half its maximum within ±{:.1}°, while the scallops (stepover {:.4} mm) spread the milled slopes over ±{:.1}°; a scallop height of about {:.2} µm (`toolpath.scallop_um`) would narrow the lobe to the peak.",
+            t_peak.atan().to_degrees(),
+            s,
+            t_max.atan().to_degrees(),
+            h_um
+        ));
+    }
     if milled.ndf_js > tol.ndf_js_max {
         notes.push(format!(
             "Milled NDF Jensen–Shannon divergence {:.4} bits is above {}.",
             milled.ndf_js, tol.ndf_js_max
         ));
     }
-    let r = f.tool_radius_mm;
     for (k, axis) in ["x", "y"].iter().enumerate() {
         let c = milled.cov_ratio[k];
         if c < tol.cov_ratio[0] || c > tol.cov_ratio[1] {
@@ -94,26 +132,45 @@ pub fn shortfall(f: &Findings) -> Vec<String> {
         ));
     }
     for a in &milled.albedo {
-        let rel = if a.target > 0.0 {
-            a.surface / a.target - 1.0
-        } else {
-            0.0
-        };
+        let rel = a.rel_error();
         if rel.abs() > tol.albedo_rel_max {
             notes.push(format!(
-                "Directional albedo at θi = {}° is {:+.1}% off the target's ({:.3} against {:.3}; at most ±{}%): {}",
+                "Directional albedo at θi = {}° is {:+.1}% off a perfect cut's ({:.3} against {:.3}; at most ±{}%): {}",
                 a.theta_i_deg,
                 rel * 100.0,
                 a.surface,
-                a.target,
+                a.ideal.unwrap_or(a.target),
                 tol.albedo_rel_max * 100.0,
                 if rel > 0.0 {
-                    "the fabricated surface is a conductor mirror per facet, while the target loses energy (a diffuse or absorbing part, or masking the facets do not have)"
+                    "the milled slopes miss the target's steep tail (beyond the machinable cone, or cut off by the ball), whose facets would shadow and mask one another"
                 } else {
-                    "the fabricated surface sends light outside the hemisphere's measured part (steep slopes, masking)"
+                    "the milled surface has steeper slopes than the target's, which shadow and mask one another"
                 }
             ));
         }
+    }
+    let beyond: Vec<String> = milled
+        .albedo
+        .iter()
+        .filter_map(|a| {
+            let ideal = a.ideal?;
+            let rel = a.target / ideal - 1.0;
+            (ideal > 0.0 && rel.abs() > tol.albedo_rel_max).then(|| {
+                format!(
+                    "{:.3} at θi = {}° against {:.3} ({:+.0}%)",
+                    a.target,
+                    a.theta_i_deg,
+                    ideal,
+                    rel * 100.0
+                )
+            })
+        })
+        .collect();
+    if !beyond.is_empty() {
+        notes.push(format!(
+            "The target's own albedo is not what any surface of its material with its slopes reflects: {} for a perfect cut. No geometry can change that: it comes from the target model's normalisation (Ward's falls as cosθi) or from a diffuse or absorbing part. The albedo checks compare the milled surface with the perfect cut.",
+            beyond.join(", ")
+        ));
     }
     if f.deviation.unreachable_fraction > 0.001 {
         notes.push(format!(
@@ -129,4 +186,25 @@ pub fn shortfall(f: &Findings) -> Vec<String> {
         ));
     }
     notes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::half_max_extent;
+    use crate::slope::{SlopeDomain, SlopeGrid};
+
+    /// A Gaussian `exp(−t²/2σ²)` falls to half its peak at `σ√(2 ln 2)`, along each axis.
+    #[test]
+    fn half_max_extent_of_a_gaussian_is_its_half_width() {
+        let (sx, sy) = (0.05f64, 0.12f64);
+        let g = SlopeGrid::from_fn(SlopeDomain::square(256, 1.0), |p, q| {
+            (-(p * p) / (2.0 * sx * sx) - (q * q) / (2.0 * sy * sy)).exp()
+        });
+        let k = (2.0 * 2f64.ln()).sqrt();
+        let cell = 2.0 / 256.0;
+        for (dir, want) in [((1.0, 0.0), sx * k), ((0.0, 1.0), sy * k)] {
+            let got = half_max_extent(&g, dir);
+            assert!((got - want).abs() < 0.5 * cell, "{dir:?}: {got} vs {want}");
+        }
+    }
 }

@@ -48,4 +48,7 @@ pub struct Metrics {
     /// The design loop's rounds, in order: each tile's as-milled model against the target.
     #[serde(default)]
     pub rounds: Vec<crate::design::Round>,
+    /// The candidate arrangements the loop chose its first round from (their uncorrected models).
+    #[serde(default)]
+    pub arrangements: Vec<crate::design::Round>,
 }

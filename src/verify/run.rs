@@ -135,6 +135,8 @@ pub struct VerifyInput<'a> {
     pub cone_deg: f64,
     /// The design loop's rounds, for `metrics.json` and the convergence figure.
     pub rounds: &'a [crate::design::Round],
+    /// The candidate arrangements' first rounds.
+    pub arrangements: &'a [crate::design::Round],
 }
 
 /// What verification produced.
@@ -191,6 +193,10 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
             .min_by(|a, b| a.score.total_cmp(&b.score))
             .map(|r| r.scale)
             .unwrap_or([1.0, 1.0]),
+        target_peak_halfwidth: {
+            let across = (input.raster_angle_deg + 90.0).to_radians();
+            explain::half_max_extent(&n.observed, (across.cos(), across.sin()))
+        },
     });
     if let Some(w) = crate::ndf::grid_warning(input.ndf) {
         notes.push(format!("{w}."));
@@ -240,6 +246,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         diffraction,
         measurement: Some(measurement),
         rounds: input.rounds.to_vec(),
+        arrangements: input.arrangements.to_vec(),
     };
     let mut figures = figures(
         cfg,
@@ -251,7 +258,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         metrics.diffraction.is_some(),
     );
     if !input.rounds.is_empty() {
-        figures.insert(0, convergence(input.rounds, &metrics, &tol));
+        figures.insert(0, convergence(input.rounds, input.arrangements, &metrics, &tol));
     }
     Ok(VerifyOutput {
         metrics,
@@ -319,7 +326,12 @@ fn milled_ndf(cfg: &VerifyConfig, input: &VerifyInput) -> Result<(SlopeGrid, f64
 
 /// The design loop's convergence: each round's as-milled model variance ratios, the tolerance band, and the
 /// simulated cut's ratios at the chosen round.
-fn convergence(rounds: &[crate::design::Round], metrics: &Metrics, tol: &Tolerances) -> Figure {
+fn convergence(
+    rounds: &[crate::design::Round],
+    arrangements: &[crate::design::Round],
+    metrics: &Metrics,
+    tol: &Tolerances,
+) -> Figure {
     use crate::plot::{LinePlot, Series, PALETTE};
     let n = rounds.len() as f64;
     // percent off the target's variance, so the band and the rounds share a readable scale
@@ -392,10 +404,23 @@ fn convergence(rounds: &[crate::design::Round], metrics: &Metrics, tol: &Toleran
             )
         })
         .collect();
+    let candidates = if arrangements.len() > 1 {
+        let list: Vec<String> = arrangements
+            .iter()
+            .map(|r| format!("seed {} [{:.3}, {:.3}]", r.seed, r.cov_ratio[0], r.cov_ratio[1]))
+            .collect();
+        format!(
+            " Round 1 is the best of {} arrangements of the same facets, each modelled uncorrected (variance ratios: {}).",
+            arrangements.len(),
+            list.join(", ")
+        )
+    } else {
+        String::new()
+    };
     Figure::new(
         "Design rounds",
         format!(
-            "Each round models what the ball leaves of the tile (its opening of the periodic tile, convolved with the scallop lobe) and scales the facet slopes so the model's variance meets the target's. The short dashed marks are the simulated G-code of the chosen round (round {chosen}), the grey dashed lines the tolerance band. {}.",
+            "Each round models what the ball leaves of the tile (its opening of the periodic tile, convolved with the scallop lobe) and scales the facet slopes so the model's variance meets the target's.{candidates} The short dashed marks are the simulated G-code of the chosen round (round {chosen}), the grey dashed lines the tolerance band. {}.",
             rows.join("; ")
         ),
         &plot.render(),
