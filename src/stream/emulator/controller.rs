@@ -56,6 +56,8 @@ pub struct Controller {
     pub(super) tlo: f64,
     /// The G28 and G30 stored positions, machine mm (kept across resets).
     pub(super) stored: [[f64; 3]; 2],
+    /// G93 inverse time feed mode is active (a reset and M2/M30 select G94).
+    pub(super) inverse_time: bool,
     pub(super) modal: Modal,
     pub(super) out: Vec<u8>,
     pub(super) log: EmulatorLog,
@@ -97,6 +99,7 @@ impl Controller {
             g92: [0.0; 3],
             tlo: 0.0,
             stored: [[0.0; 3]; 2],
+            inverse_time: false,
             modal: Modal::default(),
             out: Vec::new(),
             log: EmulatorLog::default(),
@@ -260,6 +263,7 @@ impl Controller {
         self.coord_select = 0;
         self.g92 = [0.0; 3];
         self.tlo = 0.0;
+        self.inverse_time = false;
         self.feed_override = 100;
         if moving {
             self.say("ALARM:3");

@@ -60,6 +60,8 @@ struct Parsed {
     coord_select: Option<usize>,
     /// G43.1 (`Some(true)`) or G49 (`Some(false)`).
     tool_length: Option<bool>,
+    /// G93 (`Some(true)`, inverse time) or G94 (`Some(false)`).
+    feed_mode: Option<bool>,
     l: Option<f64>,
     axis: [Option<f64>; 3],
     ijk: [Option<f64>; 3],
@@ -136,7 +138,10 @@ impl Parsed {
                     Distance::Absolute
                 };
             }
-            (94, 0) => self.group(5)?,
+            (93 | 94, 0) => {
+                self.group(5)?;
+                self.feed_mode = Some(g == 93);
+            }
             // G91.1 (incremental I/J, GRBL's only arc mode) is accepted and does nothing; G90.1 is not.
             (91, 1) => self.group(GROUP_ARC_DISTANCE)?,
             (90, 1) => return Err(20),
@@ -179,7 +184,7 @@ impl Parsed {
                 self.non_modal = Some(nm);
             }
             (28 | 30 | 92, _) => return Err(20),
-            (38 | 61 | 93, _) => {
+            (38 | 61, _) => {
                 self.unmodelled = Some(format!("G{v}"));
             }
             (_, 0) => return Err(20),
@@ -250,7 +255,7 @@ impl Parsed {
             'R' => self.unmodelled = Some(format!("{letter} word")),
             _ => return Err(20),
         }
-        if matches!(letter, 'F' | 'S' | 'P' | 'T' | 'N' | 'L') && v < 0.0 {
+        if matches!(letter, 'F' | 'S' | 'P' | 'T' | 'N') && v < 0.0 {
             return Err(4);
         }
         Ok(())
@@ -296,7 +301,7 @@ impl Parsed {
         match self.tool_length {
             // G43.1 takes exactly the Z word (GRBL's TOOL_LENGTH_OFFSET_AXIS)
             Some(true) if self.axis[2].is_none() || self.axis[0].is_some() || self.axis[1].is_some() => return Err(37),
-            Some(false) if has_axis => return Err(36),
+            // G49 is an axis command too: its axis words are used up, and ignored
             _ => {}
         }
         // G10, G92 and G43.1 consume the axis words: no motion check applies to them
@@ -338,7 +343,15 @@ impl Controller {
             return Err(20);
         }
         let k = if m.units == Units::Inch { 25.4 } else { 1.0 };
-        if let Some(f) = parsed.f {
+        let inverse = parsed.feed_mode.unwrap_or(self.inverse_time);
+        if inverse {
+            // G93: F is this block's 1/minutes, and the feed is undefined after it unless the next block
+            // gives one (GRBL zeroes it before and after every inverse-time block)
+            m.feed_mm_min = parsed.f;
+        } else if self.inverse_time {
+            // back to G94: the last feed is not carried over
+            m.feed_mm_min = parsed.f.map(|f| f * k);
+        } else if let Some(f) = parsed.f {
             m.feed_mm_min = Some(f * k);
         }
         if let Some(s) = parsed.s {
@@ -346,6 +359,17 @@ impl Controller {
         }
         if let Some(mm) = parsed.motion {
             m.motion = mm;
+        }
+        // GRBL checks G93's F word first, for any motion-mode axis command, G0 included (its condition
+        // `motion != NONE || motion != SEEK` is always true)
+        let motion_axis_command = parsed.has_axis()
+            && parsed.tool_length.is_none()
+            && !matches!(
+                parsed.non_modal,
+                Some(NonModal::SetCoord | NonModal::SetOffset | NonModal::GoStored(_))
+            );
+        if inverse && motion_axis_command && parsed.f.is_none() {
+            return Err(22);
         }
         parsed.check(&m)?;
         let select = parsed.coord_select.unwrap_or(self.coord_select);
@@ -381,7 +405,7 @@ impl Controller {
                 }
             }
         } else {
-            match self.motion(&parsed, &m, target, k, text)? {
+            match self.motion(&parsed, &m, target, k, text, inverse)? {
                 Motion::None => None,
                 Motion::Block(b) => Some((b, None)),
                 Motion::SoftLimit => {
@@ -397,8 +421,11 @@ impl Controller {
             (None, _) => None,
         };
         (self.coord, self.g92, self.stored, self.tlo, self.coord_select) = (coord, g92, stored, tlo, select);
+        self.inverse_time = inverse;
         if parsed.program_end {
-            self.coord_select = 0; // M2/M30 select G54 again
+            // M2/M30 select G54 and G94 again
+            self.coord_select = 0;
+            self.inverse_time = false;
         }
         self.modal = m;
         self.hand_over(&parsed, &m, end.unwrap_or(self.parser_pos), moves);
@@ -484,8 +511,19 @@ impl Controller {
         })
     }
 
-    /// The block's move to `target` (machine mm; `k` converts the block's units to mm), checked.
-    fn motion(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], k: f64, text: &str) -> Result<Motion, u16> {
+    /// The block's move to `target` (machine mm; `k` converts the block's units to mm), checked. In
+    /// inverse time (`inverse`, G93) the feed is `F` per minute of the block: it takes `1/F` minutes (or
+    /// longer, when an axis' maximum rate limits it).
+    #[allow(clippy::too_many_arguments)]
+    fn motion(
+        &mut self,
+        parsed: &Parsed,
+        m: &Modal,
+        target: [f64; 3],
+        k: f64,
+        text: &str,
+        inverse: bool,
+    ) -> Result<Motion, u16> {
         if !parsed.has_axis() {
             return Ok(Motion::None);
         }
@@ -505,7 +543,15 @@ impl Controller {
                 }
             }
         }
-        let b = self.block(kind, target, feed, leading_line_number(text).unwrap_or(0));
+        let line = leading_line_number(text).unwrap_or(0);
+        let b = if inverse && kind != BlockKind::Rapid {
+            // at 1 mm/min a block takes 60 s per mm (no axis rate limits that), so its length is
+            // duration/60; the feed that takes 1/F minutes over it is length·F
+            let length_mm = self.block(kind, target, 1.0, line).duration_s / 60.0;
+            self.block(kind, target, length_mm * feed, line)
+        } else {
+            self.block(kind, target, feed, line)
+        };
         Ok(if b.duration_s > 0.0 {
             Motion::Block(b)
         } else {

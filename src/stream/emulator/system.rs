@@ -192,12 +192,13 @@ impl Controller {
     fn report_modes(&mut self) {
         let m: Modal = self.modal;
         self.say(&format!(
-            "[GC:G{} G{} G{} G{} G{} G94 M{} M9 T0 F{} S{}]",
+            "[GC:G{} G{} G{} G{} G{} G{} M{} M9 T0 F{} S{}]",
             motion_number(m.motion),
             54 + self.coord_select,
             m.plane,
             if m.units == Units::Inch { 20 } else { 21 },
             if m.distance == Distance::Incremental { 91 } else { 90 },
+            if self.inverse_time { 93 } else { 94 },
             spindle_number(m.spindle),
             m.feed_mm_min.unwrap_or(0.0),
             m.spindle_rpm

@@ -275,7 +275,7 @@ fn work_coordinates_follow_grbl() {
     assert_eq!(settle_mpos(&mut c), [3.0, 0.0, -1.0], "G28 X: only X goes home");
     assert_eq!(send(&mut c, "G92.1\n"), "ok\r\n");
     assert_eq!(table(&mut c, "G92"), "0.000,0.000,0.000");
-    assert_eq!(send(&mut c, "G49\n"), "ok\r\n");
+    assert_eq!(send(&mut c, "G49X1\n"), "ok\r\n", "G49 uses up its axis words");
     assert_eq!(table(&mut c, "TLO"), "0.000");
     // GRBL's error codes
     for (line, code) in [
@@ -291,7 +291,6 @@ fn work_coordinates_follow_grbl() {
         ("G43.1X1\n", 37),       // G43.1 takes exactly Z
         ("G43.1\n", 37),
         ("G43Z1\n", 20),
-        ("G49X1\n", 36),
         ("G1X1L2F100\n", 36), // L without G10
         ("G92.2X1\n", 20),
         ("G4G10L2P1X1\n", 21), // two group-0 commands
@@ -311,4 +310,28 @@ fn work_coordinates_follow_grbl() {
     assert_eq!(table(&mut c, "G28"), "3.000,4.000,0.000");
     assert_eq!(table(&mut c, "G92"), "0.000,0.000,0.000");
     assert!(send(&mut c, "$G\n").contains(" G54 "), "a reset selects G54");
+}
+
+/// G93 inverse time as GRBL 1.1h runs it: F on every motion block (G0 included, GRBL's condition being always
+/// true), a block taking 1/F minutes, and no feed carried over into the next block or back into G94.
+#[test]
+fn inverse_time_follows_grbl() {
+    let mut c = ctl();
+    assert_eq!(send(&mut c, "G93\n"), "ok\r\n");
+    assert!(send(&mut c, "$G\n").contains(" G93 "));
+    assert_eq!(send(&mut c, "G1X10\n"), "error:22\r\n", "F on every block");
+    assert_eq!(send(&mut c, "G0X1\n"), "error:22\r\n", "even G0");
+    // 10 mm in 1/2 minute: at 15 s it is halfway, whatever the distance
+    assert_eq!(send(&mut c, "G1X10F2\n"), "ok\r\n");
+    c.advance(15.0);
+    assert!(send(&mut c, "?").contains("MPos:5.000,0.000,0.000"));
+    c.advance(20.0);
+    assert_eq!(send(&mut c, "G1X20\n"), "error:22\r\n", "the F was this block's only");
+    assert_eq!(send(&mut c, "G94\n"), "ok\r\n");
+    assert_eq!(send(&mut c, "G1X20\n"), "error:22\r\n", "nor carried back into G94");
+    assert_eq!(send(&mut c, "G1X20F300\n"), "ok\r\n");
+    // 10 mm at 300 mm/min (under the default $110): 2 s
+    c.advance(0.5);
+    let s = send(&mut c, "?");
+    assert!(s.contains("MPos:12.500,0.000,0.000"), "{s}");
 }
