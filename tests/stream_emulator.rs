@@ -598,16 +598,13 @@ fn a_users_hold_waits_in_place_and_the_resume_finishes_every_line_once() {
             hold: &hold,
             resume: &resume,
         };
-        let outcome = session::run_with(
-            &mut link,
-            &prog,
-            &test_config(),
-            &journal,
-            Mode::Fresh,
-            &mut obs,
-            controls,
-        )
-        .unwrap();
+        // no silence is injected here: the default 5 s silence timeout, so a loaded machine's scheduling
+        // delay cannot end the job (the fault trials' 1.5 s is for their silence faults)
+        let cfg = Config {
+            silence_timeout: Config::default().silence_timeout,
+            ..test_config()
+        };
+        let outcome = session::run_with(&mut link, &prog, &cfg, &journal, Mode::Fresh, &mut obs, controls).unwrap();
         let what = format!("seed {seed} on {build:?}");
         assert!(matches!(outcome, Outcome::Completed(_)), "{what}: {outcome:?}");
         assert!(

@@ -8,11 +8,11 @@
 //! - `peak_offset_deg`: angle between the normals at the two densities' peaks;
 //! - `albedo`: directional albedo `∫ f cosθo dωo` at a few incident angles, candidate over a perfect cut's.
 //!
-//! **Albedo against a perfect cut.** A milled surface is facets of one material, so the most it can
-//! reflect at `θi` is a perfect cut's albedo: Eq. 5 on the target's own observed distribution with the
-//! target's material (`ideal`). A target may reflect less for reasons no geometry can change: Ward's
-//! normalisation `1/√(cosθi cosθo)` makes a narrow lobe's albedo ≈ ρs·cosθi (half at 60°), a measured
-//! dielectric carries a diffuse part. The check compares the candidate with the perfect cut, so it
+//! **Albedo against a perfect cut.** A milled surface is facets of one material, so what it can reflect
+//! at `θi` with the target's slopes is a perfect cut's albedo: Eq. 5 on the target's own observed
+//! distribution with the target's material (`ideal`). A target may differ from that for reasons no geometry
+//! can change: Ward's normalisation `1/√(cosθi cosθo)` makes a narrow lobe's albedo ≈ ρs·cosθi (half at
+//! 60°), a measured dielectric carries a diffuse part (less than a conductor's facets, or more). The check compares the candidate with the perfect cut, so it
 //! measures what the cut got wrong; the target's own albedo is kept beside it (`target`), and the
 //! verdict's notes say when the two differ by more than the tolerance.
 

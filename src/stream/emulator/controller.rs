@@ -58,6 +58,10 @@ pub struct Controller {
     pub(super) stored: [[f64; 3]; 2],
     /// G93 inverse time feed mode is active (a reset and M2/M30 select G94).
     pub(super) inverse_time: bool,
+    /// The planner holds `$J=` jog motion (state `Jog`).
+    pub(super) jogging: bool,
+    /// A jog cancel (0x85, or `!` while jogging) is decelerating; the jog is flushed once stopped.
+    pub(super) jog_cancel: bool,
     pub(super) modal: Modal,
     pub(super) out: Vec<u8>,
     pub(super) log: EmulatorLog,
@@ -100,6 +104,8 @@ impl Controller {
             tlo: 0.0,
             stored: [[0.0; 3]; 2],
             inverse_time: false,
+            jogging: false,
+            jog_cancel: false,
             modal: Modal::default(),
             out: Vec::new(),
             log: EmulatorLog::default(),
@@ -193,6 +199,12 @@ impl Controller {
             // A controller locked by a critical alarm serves nothing but the reset (`protocol.c`).
             b'?' if self.critical => {}
             b'?' => self.status_report(),
+            // GRBL: a feed hold during a jog cancels it
+            b'!' | 0x85 if self.jogging => {
+                self.feed_hold();
+                self.jog_cancel = true;
+            }
+            0x85 => {}
             b'!' => self.feed_hold(),
             b'~' => {
                 if self.hold && self.decel_left_s <= 0.0 {
@@ -264,6 +276,8 @@ impl Controller {
         self.g92 = [0.0; 3];
         self.tlo = 0.0;
         self.inverse_time = false;
+        self.jogging = false;
+        self.jog_cancel = false;
         self.feed_override = 100;
         if moving {
             self.say("ALARM:3");
@@ -341,8 +355,8 @@ impl Controller {
         }
         if text.starts_with('$') {
             self.system_command(&text);
-        } else if self.state == State::Alarm {
-            self.say("error:9");
+        } else if self.state == State::Alarm || self.jogging {
+            self.say("error:9"); // G-code is locked in alarm and while jogging
         } else if let Err(code) = self.gcode(&text) {
             self.say(&format!("error:{code}"));
         }

@@ -156,8 +156,17 @@ impl Controller {
             }
         }
         self.run_motion(dt_s);
+        if self.jog_cancel && self.decel_left_s <= 0.0 {
+            // the jog decelerated to a stop: flush what is left of it, Idle where it stopped
+            self.flush_motion();
+            self.state = State::Idle;
+            self.jog_cancel = false;
+        }
         if self.state == State::Run && self.planner.is_empty() {
             self.state = State::Idle;
+        }
+        if self.state != State::Run {
+            self.jogging = false;
         }
         self.main_loop();
     }
@@ -263,7 +272,7 @@ impl Controller {
         Served::Done
     }
 
-    fn planner_full(&self) -> bool {
+    pub(super) fn planner_full(&self) -> bool {
         self.planner.len() >= PLANNER_BLOCKS as usize
     }
 

@@ -14,6 +14,7 @@ impl Controller {
         }
         match self.state {
             State::Idle => "Idle",
+            State::Run if self.jogging => "Jog",
             State::Run => "Run",
             State::Alarm => "Alarm",
             State::Check => "Check",

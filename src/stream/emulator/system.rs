@@ -157,8 +157,9 @@ impl Controller {
             t if t.contains('=') && t[1..].starts_with(|c: char| c.is_ascii_digit()) => {
                 return self.write_setting(&t[1..], idle_or_alarm)
             }
+            t if t.starts_with("$J=") => return self.jog(&t[3..]),
             other => {
-                if other.starts_with("$J=") || other == "$SLP" {
+                if other == "$SLP" {
                     self.log.events.push(format!("not modelled: `{other}`"));
                     return Reply::Error(3);
                 }
@@ -186,6 +187,71 @@ impl Controller {
         for l in lines {
             self.say(&l);
         }
+    }
+
+    /// `$J=`: a jog (GRBL 1.1 `jog_execute`), only when Idle or already jogging (`error:8`). Its words: G20/G21,
+    /// G90/G91 and G53 for this jog only (the parser's modes are kept), X Y Z, a required F (`error:22`), N;
+    /// anything else is `error:16`. A target beyond the soft limits is refused with `error:15` (no alarm).
+    /// The jog starts at once (state `Jog`) and moves the parser to its target.
+    fn jog(&mut self, body: &str) -> Reply {
+        if !(self.state == State::Idle && !self.hold || self.jogging) {
+            return Reply::Error(8);
+        }
+        let words = match crate::stream::program::words(body) {
+            Ok(w) => w,
+            Err(e) => return Reply::Error(e.grbl_code()),
+        };
+        let mut inch = self.modal.units == Units::Inch;
+        let mut incremental = self.modal.distance == Distance::Incremental;
+        let (mut machine, mut axis, mut feed) = (false, [None; 3], None);
+        for w in &words {
+            match (w.letter, (w.value * 10.0).round() as i32) {
+                ('G', 200) => inch = true,
+                ('G', 210) => inch = false,
+                ('G', 900) => incremental = false,
+                ('G', 910) => incremental = true,
+                ('G', 530) => machine = true,
+                ('X', _) => axis[0] = Some(w.value),
+                ('Y', _) => axis[1] = Some(w.value),
+                ('Z', _) => axis[2] = Some(w.value),
+                ('F', _) => feed = Some(w.value),
+                ('N', _) => {}
+                _ => return Reply::Error(16),
+            }
+        }
+        let Some(f) = feed else {
+            return Reply::Error(22);
+        };
+        let k = if inch { 25.4 } else { 1.0 };
+        let wco = self.wco();
+        let mut target = self.parser_pos;
+        for (i, t) in target.iter_mut().enumerate() {
+            if let Some(v) = axis[i] {
+                *t = if machine {
+                    v * k
+                } else if incremental {
+                    *t + v * k
+                } else {
+                    v * k + wco[i]
+                };
+            }
+        }
+        if self.setting(20) == 1.0 && (0..3).any(|i| target[i] > 0.0 || target[i] < -self.setting(130 + i as u16)) {
+            return Reply::Error(15);
+        }
+        let b = self.block(super::planner::BlockKind::Linear, target, f * k, 0);
+        self.parser_pos = target;
+        if b.duration_s <= 0.0 {
+            return Reply::Ok;
+        }
+        self.jogging = true;
+        self.state = State::Run;
+        if self.planner_full() {
+            self.waiting = Some(super::planner::Waiting::Plan((b, None)));
+            return Reply::Answered; // `ok` once the planner has room
+        }
+        self.planner.push_back(b);
+        Reply::Ok
     }
 
     /// `$G`: the parser's modal state.

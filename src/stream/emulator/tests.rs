@@ -335,3 +335,41 @@ fn inverse_time_follows_grbl() {
     let s = send(&mut c, "?");
     assert!(s.contains("MPos:12.500,0.000,0.000"), "{s}");
 }
+
+/// `$J=` jogging as GRBL 1.1h runs it: state `Jog`, the jog's G91 for itself only, F required, other words
+/// refused with `error:16`, G-code locked while jogging (`error:9`), a jog cancel (0x85, or `!`) decelerating
+/// to a stop and leaving the machine Idle where it stopped, and a soft limit refusing the jog (`error:15`).
+#[test]
+fn jogging_follows_grbl() {
+    let mut c = ctl();
+    // 10 mm at 300 mm/min (5 mm/s, under the default $110)
+    assert_eq!(send(&mut c, "$J=G91X10F300\n"), "ok\r\n");
+    c.advance(0.5);
+    let s = send(&mut c, "?");
+    assert!(s.starts_with("<Jog|MPos:2.500,0.000,0.000"), "{s}");
+    assert_eq!(
+        send(&mut c, "G1X1F100\n"),
+        "error:9\r\n",
+        "G-code is locked while jogging"
+    );
+    assert_eq!(send(&mut c, "$J=X1\n"), "error:22\r\n", "F required");
+    assert_eq!(send(&mut c, "$J=G1X1F100\n"), "error:16\r\n");
+    assert_eq!(send(&mut c, "$J=X1F100M3\n"), "error:16\r\n");
+    // cancel: decelerates (0.5 s at $120 = 10 mm/s² from 5 mm/s covers 1.25 mm), then Idle where it stopped
+    c.receive(0x85);
+    c.advance(1.0);
+    let s = send(&mut c, "?");
+    assert!(s.starts_with("<Idle|MPos:3.750,0.000,0.000"), "{s}");
+    assert!(send(&mut c, "$G\n").contains(" G90 "), "the jog's G91 was its own");
+    // absolute jog back, then G-code is accepted again once the jog is done
+    assert_eq!(send(&mut c, "$J=X0F300\n"), "ok\r\n");
+    c.advance(2.0);
+    assert!(send(&mut c, "?").starts_with("<Idle|MPos:0.000,0.000,0.000"));
+    assert_eq!(send(&mut c, "G1X1F100\n"), "ok\r\n");
+    c.advance(2.0);
+    // with soft limits the jog is refused, not alarmed
+    assert_eq!(send(&mut c, "$22=1\n"), "ok\r\n");
+    assert_eq!(send(&mut c, "$20=1\n"), "ok\r\n");
+    assert_eq!(send(&mut c, "$J=G53X5F100\n"), "error:15\r\n");
+    assert!(send(&mut c, "?").starts_with("<Idle"));
+}
