@@ -37,8 +37,7 @@ pub struct Findings<'a> {
 #[must_use]
 pub fn half_max_extent(g: &crate::slope::SlopeGrid, (dp, dq): (f64, f64)) -> f64 {
     let d = &g.domain;
-    let k = (0..g.density.len()).fold(0, |b, k| if g.density[k] > g.density[b] { k } else { b });
-    let (p0, q0) = (d.p_at(k % d.nx), d.q_at(k / d.nx));
+    let (p0, q0) = super::metrics::peak(g);
     let peak = g.sample(p0, q0);
     let step = 0.25 * d.dp().min(d.dq());
     let reach = (d.p_max - d.p_min).max(d.q_max - d.q_min);

@@ -131,6 +131,11 @@ impl Controller {
         [c[0] + g92[0], c[1] + g92[1], c[2] + g92[2] + tlo]
     }
 
+    /// Soft limits are on (`$20=1`) and machine position `t` lies outside the travel `[−$13x, 0]`.
+    pub(super) fn beyond_soft_limits(&self, t: [f64; 3]) -> bool {
+        self.setting(20) == 1.0 && (0..3).any(|i| t[i] > 0.0 || t[i] < -self.setting(130 + i as u16))
+    }
+
     /// The current `WCO`.
     pub(super) fn wco(&self) -> [f64; 3] {
         self.wco_of(self.coord_select, self.g92, self.tlo)

@@ -375,10 +375,8 @@ impl Controller {
         let select = parsed.coord_select.unwrap_or(self.coord_select);
         let (coord, g92, stored, tlo) = self.offsets_after(&parsed, select, k);
         // the axis words as a target: machine mm for G53, else work coordinates through the block's system
-        let wco = {
-            let c = coord[select];
-            [c[0] + g92[0], c[1] + g92[1], c[2] + g92[2] + tlo]
-        };
+        // (a G10 that changes `coord` uses up the block's axis words, so the old table serves the target)
+        let wco = self.wco_of(select, g92, tlo);
         let mut target = self.parser_pos;
         for (i, t) in target.iter_mut().enumerate() {
             if let Some(v) = parsed.axis[i] {
@@ -491,12 +489,8 @@ impl Controller {
     /// `None` when one of them leaves the soft limits (`ALARM:2`), `Some(None)` when neither moves.
     fn go_stored(&mut self, parsed: &Parsed, stored: [f64; 3], via: [f64; 3], line: u32) -> Option<Option<Moves>> {
         let home = self.stored_target(parsed, stored);
-        if self.setting(20) == 1.0 {
-            for t in [via, home] {
-                if (0..3).any(|i| t[i] > 0.0 || t[i] < -self.setting(130 + i as u16)) {
-                    return None;
-                }
-            }
+        if self.beyond_soft_limits(via) || self.beyond_soft_limits(home) {
+            return None;
         }
         let start = self.parser_pos;
         let first = self.block(BlockKind::Rapid, via, 0.0, line);
@@ -536,12 +530,8 @@ impl Controller {
             MotionMode::Linear => BlockKind::Linear,
             _ => self.arc(parsed, m, target, k, text)?,
         };
-        if self.setting(20) == 1.0 {
-            for (i, t) in target.iter().enumerate() {
-                if *t > 0.0 || *t < -self.setting(130 + i as u16) {
-                    return Ok(Motion::SoftLimit);
-                }
-            }
+        if self.beyond_soft_limits(target) {
+            return Ok(Motion::SoftLimit);
         }
         let line = leading_line_number(text).unwrap_or(0);
         let b = if inverse && kind != BlockKind::Rapid {

@@ -236,7 +236,7 @@ impl Controller {
                 };
             }
         }
-        if self.setting(20) == 1.0 && (0..3).any(|i| target[i] > 0.0 || target[i] < -self.setting(130 + i as u16)) {
+        if self.beyond_soft_limits(target) {
             return Reply::Error(15);
         }
         let b = self.block(super::planner::BlockKind::Linear, target, f * k, 0);
