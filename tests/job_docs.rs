@@ -33,6 +33,9 @@ fn every_job_key_is_documented_and_every_documented_key_exists() {
     // the optional keys a job without them does not serialise
     have.insert("target.polish".to_string());
     have.insert("target.merl_from".to_string());
+    for k in ["target.highlight", "target.highlight_extent_deg", "target.material"] {
+        have.insert(k.to_string());
+    }
     let doc = std::fs::read_to_string(root.join("docs/JOB.md")).unwrap();
     let documented: BTreeSet<String> = doc
         .lines()

@@ -16,6 +16,7 @@
 //! ```
 
 pub mod fresnel;
+pub mod highlight;
 pub mod merl;
 pub(crate) mod microfacet;
 pub mod rgl;
@@ -23,6 +24,7 @@ mod spec;
 pub(crate) mod tabulated;
 
 pub use fresnel::{ConductorIor, PRESETS};
+pub use highlight::Highlight;
 pub use merl::Merl;
 pub use microfacet::{BlinnPhong, Family, Microfacet};
 pub use rgl::RglBsdf;
@@ -89,6 +91,8 @@ pub enum Model {
     Rgl(Box<RglBsdf>),
     /// A tabulated half-angle distribution (CSV), used as the NDF of a microfacet model.
     Tabulated(Box<TabulatedNdf>),
+    /// A drawn highlight (PNG) mapped to slope space, used as the NDF of a microfacet model.
+    Highlight(Box<Highlight>),
 }
 
 /// A BRDF: a model and, optionally, the conductor the part is made of.
@@ -106,7 +110,7 @@ impl Brdf {
     /// Build a BRDF from a spec string such as `ggx:ax=0.1,ay=0.3,material=gold` or `merl:PATH`.
     ///
     /// Forms: `beckmann:alpha=A`, `ggx:alpha=A`, `ggx:ax=A,ay=B` (also `beckmann:ax=..,ay=..`),
-    /// `ward:ax=A,ay=B`, `blinn:n=N`, `merl:PATH`, `rgl:PATH`, `csv:PATH`, each optionally followed by
+    /// `ward:ax=A,ay=B`, `blinn:n=N`, `merl:PATH`, `rgl:PATH`, `csv:PATH`, `highlight:PNG` (optionally `,extent_deg=E`, default 30: [`highlight`]), each optionally followed by
     /// `,material=NAME` (see [`PRESETS`]) or `,eta=E,k=K`. Paths must not contain commas.
     pub fn parse(spec: &str) -> Result<Self, BrdfError> {
         spec::parse(spec)
@@ -144,6 +148,7 @@ impl Brdf {
             Model::Merl(m) => m.eval(wi, wo),
             Model::Rgl(r) => r.eval(wi, wo),
             Model::Tabulated(t) => microfacet(t.d(&wh), t.g(wi, wo, &wh)),
+            Model::Highlight(h) => microfacet(h.d(&wh), h.g(wi, wo, &wh)),
         }
     }
 
@@ -153,6 +158,7 @@ impl Brdf {
         match &self.model {
             Model::Rgl(r) => Some(r.ndf(wm)),
             Model::Tabulated(t) => Some(t.d(wm)),
+            Model::Highlight(h) => Some(h.d(wm)),
             _ => None,
         }
     }
@@ -166,13 +172,21 @@ impl Brdf {
             Model::BlinnPhong(b) => Some(b.d(wm)),
             Model::Ward(w) => Microfacet::new(Family::Beckmann, w.alpha_x, w.alpha_y).map(|m| m.d(wm)),
             Model::Merl(_) => None,
-            Model::Rgl(_) | Model::Tabulated(_) => self.measured_ndf(wm),
+            Model::Rgl(_) | Model::Tabulated(_) | Model::Highlight(_) => self.measured_ndf(wm),
+        }
+    }
+
+    /// The drawn highlight this BRDF was made from, if it is one.
+    pub fn highlight(&self) -> Option<&Highlight> {
+        match &self.model {
+            Model::Highlight(h) => Some(h),
+            _ => None,
         }
     }
 
     /// True when [`Brdf::measured_ndf`] answers.
     pub fn has_measured_ndf(&self) -> bool {
-        matches!(self.model, Model::Rgl(_) | Model::Tabulated(_))
+        matches!(self.model, Model::Rgl(_) | Model::Tabulated(_) | Model::Highlight(_))
     }
 }
 

@@ -11,7 +11,11 @@ fn err(spec: &str, reason: impl Into<String>) -> BrdfError {
     }
 }
 
-const KINDS: &str = "beckmann, ggx, ward, blinn, merl, rgl, csv";
+const KINDS: &str = "beckmann, ggx, ward, blinn, merl, rgl, csv, highlight";
+
+/// The default `extent_deg` of a `highlight:` spec: the angle of reflection at the middle of the image's
+/// longer edge, degrees.
+pub const DEFAULT_EXTENT_DEG: f64 = 30.0;
 
 /// Parse `kind:key=value,…` (analytic) or `kind:PATH,key=value,…` (measured).
 pub(super) fn parse(spec: &str) -> Result<Brdf, BrdfError> {
@@ -22,7 +26,7 @@ pub(super) fn parse(spec: &str) -> Result<Brdf, BrdfError> {
     let kind = kind.trim().to_ascii_lowercase();
     let mut tokens: Vec<&str> = rest.split(',').map(str::trim).collect();
     let path = match kind.as_str() {
-        "merl" | "rgl" | "csv" => {
+        "merl" | "rgl" | "csv" | "highlight" => {
             let p = tokens.remove(0);
             if p.is_empty() {
                 return Err(err(spec, format!("`{kind}:` needs a file path")));
@@ -88,6 +92,10 @@ pub(super) fn parse(spec: &str) -> Result<Brdf, BrdfError> {
         "merl" => Model::Merl(Box::new(super::Merl::read(Path::new(path.unwrap()))?)),
         "rgl" => Model::Rgl(Box::new(super::RglBsdf::read(Path::new(path.unwrap()))?)),
         "csv" => Model::Tabulated(Box::new(super::TabulatedNdf::read(Path::new(path.unwrap()))?)),
+        "highlight" => {
+            let extent = positive(&mut params, "extent_deg")?.unwrap_or(DEFAULT_EXTENT_DEG);
+            Model::Highlight(Box::new(super::Highlight::read(Path::new(path.unwrap()), extent)?))
+        }
         other => return Err(err(spec, format!("unknown model `{other}`; expected one of {KINDS}"))),
     };
     if let Some(k) = params.keys().next() {

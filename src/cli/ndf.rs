@@ -9,9 +9,20 @@ use std::path::PathBuf;
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Target BRDF: beckmann:alpha=A | ggx:alpha=A | ggx:ax=A,ay=B | ward:ax=A,ay=B | blinn:n=N |
-    /// merl:PATH | rgl:PATH | csv:PATH, optionally followed by ,material=NAME or ,eta=E,k=K
+    /// merl:PATH | rgl:PATH | csv:PATH | highlight:PNG[,extent_deg=E], optionally followed by ,material=NAME
+    /// or ,eta=E,k=K
+    #[arg(long, required_unless_present = "highlight", conflicts_with = "highlight")]
+    pub brdf: Option<String>,
+    /// A drawn highlight (PNG) as the target instead of --brdf: the light a collimated light along the
+    /// normal throws onto a screen parallel to the part, seen from above (docs/DESIGN.md §2.1)
     #[arg(long)]
-    pub brdf: String,
+    pub highlight: Option<PathBuf>,
+    /// With --highlight: the angle of reflection at the middle of the image's longer edge (degrees)
+    #[arg(long, default_value_t = 30.0, requires = "highlight")]
+    pub highlight_extent_deg: f64,
+    /// With --highlight: the part's material (a preset name)
+    #[arg(long, requires = "highlight")]
+    pub material: Option<String>,
     /// Base material lobe to deconvolve (a BRDF spec), or `none`
     #[arg(long, default_value = "none")]
     pub base: String,
@@ -51,7 +62,23 @@ pub fn run(a: &Args) -> Result<()> {
         },
     };
     cfg.validate()?;
-    let brdf = Brdf::parse(&a.brdf).context("--brdf")?;
+    let brdf = match (&a.brdf, &a.highlight) {
+        (Some(spec), _) => Brdf::parse(spec).context("--brdf")?,
+        (None, Some(path)) => {
+            let p = path.display().to_string();
+            anyhow::ensure!(!p.contains(','), "--highlight {p}: the path must not contain a comma");
+            let mut spec = format!("highlight:{p},extent_deg={}", a.highlight_extent_deg);
+            if let Some(m) = &a.material {
+                anyhow::ensure!(
+                    !m.contains(',') && !m.contains('='),
+                    "--material `{m}` is not a material name"
+                );
+                spec.push_str(&format!(",material={m}"));
+            }
+            Brdf::parse(&spec).context("--highlight")?
+        }
+        (None, None) => anyhow::bail!("give --brdf SPEC or --highlight PNG"),
+    };
     let base = match a.base.trim() {
         "none" | "" => None,
         s => Some(Brdf::parse(s).context("--base")?),

@@ -56,8 +56,12 @@ pub fn run(a: &Args) -> Result<i32> {
                 Progress::Arrangement(_) => format!("seed {:>20}", round.seed),
                 _ => format!("round {}", round.round),
             };
+            let highlight = round
+                .highlight_corr
+                .map(|c| format!(", highlight {c:.4}"))
+                .unwrap_or_default();
             let line = format!(
-                    "   {what}  as-milled model: corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}], relief {:.3} mm, steps {:.1} µm rms",
+                    "   {what}  as-milled model: corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}]{highlight}, relief {:.3} mm, steps {:.1} µm rms",
                     round.ndf_corr,
                     round.ndf_l1,
                     round.cov_ratio[0],

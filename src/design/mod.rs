@@ -120,6 +120,9 @@ pub struct Round {
     pub scale: [f64; 2],
     /// The round's score: its worst figure as a fraction of its tolerance band (≤ 1 meets them all).
     pub score: f64,
+    /// With a drawn highlight target: the correlation of the model's highlight with the image.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub highlight_corr: Option<f64>,
 }
 
 /// What the loop needs besides the facets configuration.
@@ -143,6 +146,11 @@ pub struct DesignInput<'a> {
     pub corr_min: f64,
     /// The largest relative L1 distance (the verdict's).
     pub l1_max: f64,
+    /// A drawn highlight target: each round's model is also rendered in its configuration and scored by
+    /// its correlation with the image, since scaling the slopes to meet the variance also scales the shape.
+    pub highlight: Option<&'a crate::brdf::Highlight>,
+    /// The smallest highlight correlation (the verdict's).
+    pub highlight_corr_min: f64,
 }
 
 /// The loop's result.
@@ -284,11 +292,13 @@ fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale
             (1.0 - v) / (1.0 - lo).max(1e-9)
         }
     };
+    let highlight_corr = input.highlight.map(|h| h.correlation(&milled));
     let score = [
         band(cov_ratio[0]),
         band(cov_ratio[1]),
         (1.0 - ndf_corr) / (1.0 - input.corr_min).max(1e-9),
         ndf_l1 / input.l1_max.max(1e-9),
+        highlight_corr.map_or(0.0, |c| (1.0 - c) / (1.0 - input.highlight_corr_min).max(1e-9)),
     ]
     .into_iter()
     .fold(0.0, f64::max);
@@ -305,5 +315,6 @@ fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale
         unreachable: model::unreachable_fraction(tile, &opened),
         scale,
         score,
+        highlight_corr,
     }
 }

@@ -42,8 +42,19 @@ pub const VERSION: u32 = 1;
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TargetSection {
-    /// The target BRDF spec.
+    /// The target BRDF spec (empty when `highlight` is given instead).
+    #[serde(default, skip_serializing_if = "String::is_empty")]
     pub brdf: String,
+    /// A drawn highlight (PNG, relative to the job file) as the target instead of a BRDF
+    /// ([`crate::brdf::highlight`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub highlight: Option<String>,
+    /// The angle of reflection at the middle of the highlight image's longer edge, degrees.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub highlight_extent_deg: Option<f64>,
+    /// The part's material with a `highlight` (a preset name, as in a BRDF spec's `material=`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub material: Option<String>,
     /// `"scallop"`, `"none"` or a BRDF spec.
     #[serde(default = "default_base")]
     pub base: String,
@@ -205,8 +216,8 @@ impl Job {
             .map_err(|e| invalid(format!("`target.merl_from`: {e}")))?
             .into_iter()
             .collect();
-        let target =
-            Brdf::parse(&resolve_spec(&job.target.brdf, &dir)).map_err(|e| invalid(format!("`target.brdf`: {e}")))?;
+        let (key, spec) = target_spec(&job.target, &dir).map_err(&invalid)?;
+        let target = Brdf::parse(&spec).map_err(|e| invalid(format!("`{key}`: {e}")))?;
         if !matches!(job.target.base.as_str(), "scallop" | "none") {
             Brdf::parse(&resolve_spec(&job.target.base, &dir)).map_err(|e| invalid(format!("`target.base`: {e}")))?;
         }
@@ -274,6 +285,46 @@ impl Job {
             slope_cap_from,
             prepared,
         })
+    }
+}
+
+/// The target's BRDF spec, from `target.brdf` or from `target.highlight` (with its extent and material), and
+/// the key it came from. Exactly one of the two must be given; the highlight's keys only go with it.
+fn target_spec(t: &TargetSection, dir: &Path) -> Result<(&'static str, String), String> {
+    match (&t.highlight, t.brdf.trim().is_empty()) {
+        (Some(_), false) => Err("give `target.brdf` or `target.highlight`, not both".into()),
+        (None, true) => Err("missing `target.brdf` (a BRDF spec) or `target.highlight` (a PNG)".into()),
+        (None, false) => {
+            for (key, given) in [
+                ("highlight_extent_deg", t.highlight_extent_deg.is_some()),
+                ("material", t.material.is_some()),
+            ] {
+                if given {
+                    return Err(format!(
+                        "`target.{key}` goes with `target.highlight`; with `target.brdf` give the material in the spec (`…,material=NAME`)"
+                    ));
+                }
+            }
+            Ok(("target.brdf", resolve_spec(&t.brdf, dir)))
+        }
+        (Some(path), true) => {
+            if path.contains(',') {
+                return Err(format!(
+                    "`target.highlight` = `{path}`: the path must not contain a comma"
+                ));
+            }
+            let mut spec = format!("highlight:{path}");
+            if let Some(e) = t.highlight_extent_deg {
+                spec.push_str(&format!(",extent_deg={e}"));
+            }
+            if let Some(m) = &t.material {
+                if m.contains(',') || m.contains('=') {
+                    return Err(format!("`target.material` = `{m}` is not a material name"));
+                }
+                spec.push_str(&format!(",material={m}"));
+            }
+            Ok(("target.highlight", resolve_spec(&spec, dir)))
+        }
     }
 }
 
@@ -448,7 +499,7 @@ fn check_work(job: &Job, r_mm: f64) -> Result<(), String> {
 
 /// Paths in `merl:`, `rgl:` and `csv:` specs are relative to the job file.
 pub(crate) fn resolve_spec(spec: &str, dir: &Path) -> String {
-    for kind in ["merl:", "rgl:", "csv:"] {
+    for kind in ["merl:", "rgl:", "csv:", "highlight:"] {
         if let Some(rest) = spec.strip_prefix(kind) {
             let (path, tail) = rest
                 .split_once(',')

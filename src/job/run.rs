@@ -237,6 +237,8 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
             cov_band: tol.cov_ratio,
             corr_min: tol.ndf_corr_min,
             l1_max: tol.ndf_l1_max,
+            highlight: ready.target.highlight(),
+            highlight_corr_min: tol.highlight_corr_min,
         },
         &mut |p| match p {
             crate::design::Progress::Arrangement(r) => progress(Progress::Arrangement(r)),

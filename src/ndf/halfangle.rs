@@ -8,7 +8,9 @@
 //! current estimate (by quadrature over the slope grid) gives `G = G1(wi) G1(wo)`, and the estimate is
 //! divided by it; a few fixed-point rounds converge because G depends weakly on D.
 //!
-//! Data that carries its NDF directly (RGL files, half-angle CSV tables) is sampled as is.
+//! Data that carries its NDF directly (RGL files, half-angle CSV tables) is sampled as is; a drawn highlight
+//! is averaged over each cell ([`crate::brdf::Highlight::slope_grid`]), since its pixels are finer than the
+//! grid.
 
 use crate::brdf::{luminance, Brdf};
 use crate::geometry::{from_half_diff, slope_to_normal};
@@ -50,6 +52,9 @@ pub enum Source {
 
 /// The slope density `P22` of a BRDF's half-angle distribution on `domain`, normalised to unit mass.
 pub fn half_angle_density(brdf: &Brdf, domain: SlopeDomain, cfg: &HalfAngleConfig) -> (SlopeGrid, Source) {
+    if let crate::brdf::Model::Highlight(h) = &brdf.model {
+        return (h.slope_grid(domain), Source::MeasuredNdf);
+    }
     if brdf.has_measured_ndf() {
         let mut g = SlopeGrid::from_fn(domain, |p, q| {
             let wm = slope_to_normal(p, q);

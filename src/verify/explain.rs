@@ -124,7 +124,11 @@ pub fn shortfall(f: &Findings) -> Vec<String> {
             notes.push(format!("Slope variance along {axis} is {c:.3}× the target's, {why}."));
         }
     }
-    if milled.peak_offset_deg > tol.peak_offset_deg_max {
+    let peak_checked = milled
+        .checks
+        .iter()
+        .any(|c| c.name == super::metrics::PEAK_CHECK && !c.pass);
+    if peak_checked && milled.peak_offset_deg > tol.peak_offset_deg_max {
         notes.push(format!(
             "The milled NDF's peak is {:.2}° from the target's (at most {}°): the relief tilts or a lobe is skewed.",
             milled.peak_offset_deg, tol.peak_offset_deg_max

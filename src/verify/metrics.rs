@@ -39,6 +39,8 @@ pub struct Tolerances {
     pub peak_offset_deg_max: f64,
     /// Largest relative albedo error.
     pub albedo_rel_max: f64,
+    /// Smallest correlation of the milled surface's highlight with a `highlight` target's image.
+    pub highlight_corr_min: f64,
 }
 
 impl Default for Tolerances {
@@ -50,6 +52,7 @@ impl Default for Tolerances {
             cov_ratio: [0.9, 1.1],
             peak_offset_deg_max: 2.0,
             albedo_rel_max: 0.05,
+            highlight_corr_min: 0.95,
         }
     }
 }
@@ -85,17 +88,26 @@ impl Tolerances {
             ("ndf_js_max", self.ndf_js_max),
             ("peak_offset_deg_max", self.peak_offset_deg_max),
             ("albedo_rel_max", self.albedo_rel_max),
+            ("highlight_corr_min", self.highlight_corr_min),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(bad(field, "a number ≥ 0", v.to_string()));
             }
         }
-        if self.ndf_corr_min > 1.0 {
-            return Err(bad("ndf_corr_min", "at most 1", self.ndf_corr_min.to_string()));
+        for (field, v) in [
+            ("ndf_corr_min", self.ndf_corr_min),
+            ("highlight_corr_min", self.highlight_corr_min),
+        ] {
+            if v > 1.0 {
+                return Err(bad(field, "at most 1", v.to_string()));
+            }
         }
         Ok(())
     }
 }
+
+/// The name of the peak direction check.
+pub const PEAK_CHECK: &str = "peak direction offset (°)";
 
 /// One checked figure.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
@@ -254,7 +266,7 @@ pub fn measure(
         });
     }
     checks.push(Check {
-        name: "peak direction offset (°)".into(),
+        name: PEAK_CHECK.into(),
         value: peak_offset_deg,
         tolerance: format!("≤ {}", tol.peak_offset_deg_max),
         pass: peak_offset_deg <= tol.peak_offset_deg_max,

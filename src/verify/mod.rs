@@ -12,6 +12,7 @@
 //! - `report`: the single-page offline HTML report.
 
 pub(crate) mod explain;
+pub mod highlight;
 pub(crate) mod metrics;
 pub mod milled;
 pub(crate) mod render;
@@ -51,4 +52,34 @@ pub struct Metrics {
     /// The candidate arrangements the loop chose its first round from (their uncorrected models).
     #[serde(default)]
     pub arrangements: Vec<crate::design::Round>,
+    /// With a `highlight` target: the correlation of the milled surface's highlight, rendered in the image's
+    /// configuration, with the image (the same as `highlight.milled_corr`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub highlight_corr: Option<f64>,
+    /// With a `highlight` target: the image, its configuration and the correlations.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub highlight: Option<HighlightMetrics>,
+}
+
+/// A `highlight` target against what was designed and milled (`metrics.json` `highlight`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct HighlightMetrics {
+    /// The image file.
+    pub image: String,
+    /// Its size, pixels.
+    pub size_px: [usize; 2],
+    /// The angle of reflection at the middle of its longer edge, degrees.
+    pub extent_deg: f64,
+    /// The configuration the image and the renderings are in.
+    pub configuration: String,
+    /// The size both are compared at, pixels (the image box-averaged).
+    pub compared_px: [usize; 2],
+    /// Correlation of the milled surface's highlight (its NDF, the scallop and polish lobe included) with
+    /// the image.
+    pub milled_corr: f64,
+    /// … of the design tile's (⊛ the base lobe).
+    pub design_corr: f64,
+    /// … of the target's observed distribution as the NDF grid holds it: the most any design could reach
+    /// on this grid.
+    pub grid_corr: f64,
 }

@@ -7,7 +7,7 @@
 
 use super::milled::{self, Measurement};
 use super::report::Figure;
-use super::{explain, metrics, render, Metrics, Tolerances};
+use super::{explain, highlight, metrics, render, Metrics, Tolerances};
 use crate::brdf::Brdf;
 use crate::facets::Tile;
 use crate::geometry::Vec3;
@@ -175,8 +175,12 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
     };
     let (milled, outside, measurement) = milled_ndf(cfg, input)?;
     let cone_tan = input.cone_deg.to_radians().tan();
-    let design_m = metrics::measure(&n.observed, &design, input.target, &cfg.incident_deg, &tol, cone_tan);
-    let milled_m = metrics::measure(&n.observed, &milled, input.target, &cfg.incident_deg, &tol, cone_tan);
+    let mut design_m = metrics::measure(&n.observed, &design, input.target, &cfg.incident_deg, &tol, cone_tan);
+    let mut milled_m = metrics::measure(&n.observed, &milled, input.target, &cfg.incident_deg, &tol, cone_tan);
+    let highlight = input
+        .target
+        .highlight()
+        .map(|h| highlight::compare(h, &n.observed, &design, &milled, &mut design_m, &mut milled_m, &tol));
     let facets = input.tile.config.facets_x * input.tile.config.facets_y;
     let mut notes = explain::shortfall(&explain::Findings {
         milled: &milled_m,
@@ -193,11 +197,21 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
             .min_by(|a, b| a.score.total_cmp(&b.score))
             .map(|r| r.scale)
             .unwrap_or([1.0, 1.0]),
-        target_peak_halfwidth: {
+        // a drawn highlight has no single peak to compare the scallops' lobe with (its check is the image's)
+        target_peak_halfwidth: if input.target.highlight().is_some() {
+            0.0
+        } else {
             let across = (input.raster_angle_deg + 90.0).to_radians();
             explain::half_max_extent(&n.observed, (across.cos(), across.sin()))
         },
     });
+    if let Some(h) = highlight
+        .as_ref()
+        .map(|h| &h.metrics)
+        .filter(|h| h.milled_corr < tol.highlight_corr_min)
+    {
+        notes.push(highlight::why(h, &tol));
+    }
     if let Some(w) = crate::ndf::grid_warning(input.ndf) {
         notes.push(format!("{w}."));
     }
@@ -247,6 +261,8 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         measurement: Some(measurement),
         rounds: input.rounds.to_vec(),
         arrangements: input.arrangements.to_vec(),
+        highlight_corr: highlight.as_ref().map(|h| h.metrics.milled_corr),
+        highlight: highlight.as_ref().map(|h| h.metrics.clone()),
     };
     let mut figures = figures(
         cfg,
@@ -257,6 +273,9 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         wave_albedo,
         metrics.diffraction.is_some(),
     );
+    if let Some(h) = highlight {
+        figures.insert(0, h.figure);
+    }
     if !input.rounds.is_empty() {
         figures.insert(0, convergence(input.rounds, input.arrangements, &metrics, &tol));
     }
