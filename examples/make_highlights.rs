@@ -4,7 +4,7 @@
 //! `cargo run --release --example make_highlights -- DIR [SOFT_DEG]` writes `DIR/star.png` and
 //! `DIR/ring.png` (256 × 256, 8-bit grey, sRGB-encoded); `SOFT_DEG` overrides [`SOFT_DEG`] (0 draws hard
 //! edges). Shapes are given in degrees of reflection for an image whose
-//! longer edge's middle is at [`EXTENT_DEG`]; each pixel is the shape's coverage of 4 × 4 sub-pixels,
+//! edges' middles are at [`EXTENT_DEG`] of reflection; each pixel is the shape's coverage of 4 × 4 sub-pixels,
 //! softened by a Gaussian of [`SOFT_DEG`]: a highlight on metal has soft edges (the default job's polish
 //! lobe alone, Beckmann α = 0.06, blurs reflection by about 4.8° rms), and no cut of that material could
 //! show a sharper one.

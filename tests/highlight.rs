@@ -85,8 +85,8 @@ fn bad_highlight_targets_are_refused_with_the_file_and_key_named() {
             vec!["target.highlight", "nowhere.png"],
         ),
         (
-            format!("highlight = \"{star}\"\nhighlight_extent_deg = 85.0"),
-            vec!["target.highlight", "extent", "[1, 80]"],
+            format!("highlight = \"{star}\"\nhighlight_extent_deg = 45.0"),
+            vec!["target.highlight", "extent", "[1, 40]"],
         ),
         (
             format!("highlight = \"{star}\"\nmaterial = \"unobtainium\""),

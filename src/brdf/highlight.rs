@@ -4,8 +4,8 @@
 //! the part's normal (`ωi = z`), and a flat screen parallel to the part at distance `L`, seen from above
 //! (image right = the part's +x, image up = +y). A screen point `(X, Y)`, in units of `L`, receives the
 //! light reflected into `ωo ∝ (X, Y, 1)`, at `tan θo = R = √(X² + Y²)`. The image's half-width along its
-//! longer side is `tan(extent)`: `highlight_extent_deg` is the angle of reflection at the middle of the
-//! image's longer edge.
+//! longer axis is `tan(extent)`: `highlight_extent_deg` is the angle of reflection at the ends of the image's
+//! longer axis (the middles of its shorter edges; of every edge for a square image), at most 40°.
 //!
 //! The facet that sends `z` into `ωo` has the half vector `ωh ∝ z + ωo ∝ (X, Y, 1 + ρ)`, `ρ = √(1 + R²)`, so
 //! its slope is `(p, q) = −(X, Y)/(1 + ρ)`, with `s = |(p, q)| = tan(θo/2)`; the inverse is
@@ -40,8 +40,12 @@ pub const MAX_FILE_BYTES: u64 = 256 << 20;
 /// longer side before they are compared with a rendered highlight.
 pub const COMPARE_SIDE_PX: usize = 256;
 
-/// Accepted extents, degrees of reflection at the middle of the longer edge.
-pub const EXTENT_DEG: (f64, f64) = (1.0, 80.0);
+/// The most sub-samples per cell side of [`Highlight::slope_grid`].
+pub const MAX_SUBSAMPLES: usize = 48;
+
+/// Accepted extents, degrees of reflection at the ends of the longer axis: up to 40° (corners of a square
+/// image at 50°, facets at 25°), where Fresnel and masking are still within about 1% of 1.
+pub const EXTENT_DEG: (f64, f64) = (1.0, 40.0);
 
 /// A highlight image and its geometry, usable as the NDF of a microfacet model.
 #[derive(Clone, Debug)]
@@ -54,7 +58,7 @@ pub struct Highlight {
     pub h: usize,
     /// Linear luminance, row-major, top row first.
     pub pixels: Vec<f64>,
-    /// Angle of reflection at the middle of the longer edge, degrees.
+    /// Angle of reflection at the ends of the longer axis, degrees.
     pub extent_deg: f64,
     /// Side of a pixel on the screen, in units of the screen's distance (`tan θo` per pixel).
     pub pixel_tan: f64,
@@ -116,8 +120,14 @@ impl Highlight {
                 EXTENT_DEG.0, EXTENT_DEG.1
             ));
         }
-        if w < 2 || h < 2 || pixels.len() != w * h {
-            return Err(format!("expected at least 2 × 2 pixels, got {w} × {h}"));
+        if pixels.len() != w * h {
+            return Err(format!("{} pixel values for a {w} × {h} image", pixels.len()));
+        }
+        let f = w.max(h).div_ceil(COMPARE_SIDE_PX).max(1);
+        if w / f < 2 || h / f < 2 {
+            return Err(format!(
+                "the image is {w} × {h} pixels: too thin to compare with (each side must keep at least 2 pixels when the longer one is reduced to {COMPARE_SIDE_PX})"
+            ));
         }
         if let Some(i) = pixels.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
             return Err(format!("pixel {} of row {} is not a finite value ≥ 0", i % w, i / w));
@@ -159,8 +169,8 @@ impl Highlight {
     pub fn irradiance(&self, x: f64, y: f64) -> f64 {
         let c = (x / self.pixel_tan + self.w as f64 / 2.0).floor();
         let r = (self.h as f64 / 2.0 - y / self.pixel_tan).floor();
-        if c < 0.0 || r < 0.0 || c >= self.w as f64 || r >= self.h as f64 {
-            return 0.0;
+        if !(c >= 0.0 && r >= 0.0 && c < self.w as f64 && r < self.h as f64) {
+            return 0.0; // outside the image, or not a number
         }
         self.pixels[r as usize * self.w + c as usize]
     }
@@ -189,14 +199,16 @@ impl Highlight {
         self.smith.g1(wi) * self.smith.g1(wo)
     }
 
-    /// `P22` averaged over each cell of `domain` (sub-sampled finely enough that every pixel the cell covers
-    /// is seen), normalised to unit mass on the grid.
+    /// `P22` averaged over each cell of `domain`, normalised to unit mass on the grid. Each cell is
+    /// sub-sampled finely enough that every pixel it covers is seen, up to [`MAX_SUBSAMPLES`]² samples per
+    /// cell; an image finer than that (thousands of pixels over a narrow extent on a coarse grid) is
+    /// sampled, not averaged.
     pub fn slope_grid(&self, domain: SlopeDomain) -> SlopeGrid {
         // a slope step ds moves the screen point by up to J^(1/2)·ds·(1 + s²)/(…) ≤ 2(1 + s²)/(1 − s²)² ds
         let s = self.support_slope().min(0.99);
         let stretch = 2.0 * (1.0 + s * s) / (1.0 - s * s).powi(2);
         let cell = domain.dp().max(domain.dq());
-        let k = ((2.0 * stretch * cell / self.pixel_tan).ceil() as usize).clamp(1, 24);
+        let k = ((2.0 * stretch * cell / self.pixel_tan).ceil() as usize).clamp(1, MAX_SUBSAMPLES);
         let (dp, dq) = (domain.dp() / k as f64, domain.dq() / k as f64);
         let mut density = vec![0.0; domain.len()];
         density.par_chunks_mut(domain.nx).enumerate().for_each(|(j, row)| {
@@ -243,8 +255,10 @@ impl Highlight {
     }
 
     /// The highlight a slope distribution casts in this image's configuration, at the comparison size:
-    /// `I ∝ P22(p(X, Y), q(X, Y)) / J` at each pixel's centre, scaled to the image's total.
-    pub fn render(&self, grid: &SlopeGrid) -> (Vec<f64>, usize, usize) {
+    /// `I ∝ P22(p(X, Y) − p̄, q(X, Y) − q̄) / J` at each pixel's centre, scaled to the image's total.
+    /// `tilt = (p̄, q̄)` is the mean slope the NDF stage removed (a tileable surface has none): the part tilted
+    /// by it shows the highlight where it was drawn, so it is put back before the comparison.
+    pub fn render(&self, grid: &SlopeGrid, tilt: (f64, f64)) -> (Vec<f64>, usize, usize) {
         let (f, w, h) = self.compare_size();
         let px = self.pixel_tan * f as f64;
         // the comparison image is the top-left w·f × h·f pixels, so its centre is offset from the image's
@@ -258,7 +272,7 @@ impl Highlight {
             for (c, v) in row.iter_mut().enumerate() {
                 let x = x0 + (c as f64 + 0.5) * px;
                 let (p, q) = screen_to_slope(x, y);
-                *v = grid.sample(p, q) / jacobian(p * p + q * q);
+                *v = grid.sample(p - tilt.0, q - tilt.1) / jacobian(p * p + q * q);
             }
         });
         let (target, _, _) = self.compare_image();
@@ -271,9 +285,9 @@ impl Highlight {
 
     /// Pearson correlation between the image and the highlight `grid` casts ([`Highlight::render`]), at the
     /// comparison size.
-    pub fn correlation(&self, grid: &SlopeGrid) -> f64 {
+    pub fn correlation(&self, grid: &SlopeGrid, tilt: (f64, f64)) -> f64 {
         let (a, _, _) = self.compare_image();
-        let (b, _, _) = self.render(grid);
+        let (b, _, _) = self.render(grid, tilt);
         pearson(&a, &b)
     }
 
@@ -283,9 +297,14 @@ impl Highlight {
         let (f, w, h) = self.compare_size();
         let (img, _, _) = self.compare_image();
         let max = img.iter().fold(0.0f64, |a, b| a.max(*b));
-        let half = (
-            (w * f) as f64 * self.pixel_tan / 2.0,
-            (h * f) as f64 * self.pixel_tan / 2.0,
+        // the compared image is the top-left (w·f) × (h·f) pixels of the image
+        let (x0, y1) = (
+            -(self.w as f64) / 2.0 * self.pixel_tan,
+            self.h as f64 / 2.0 * self.pixel_tan,
+        );
+        let (x1, y0) = (
+            x0 + (w * f) as f64 * self.pixel_tan,
+            y1 - (h * f) as f64 * self.pixel_tan,
         );
         let panel = |values: &[f64], t: &str| {
             // the heatmap's row 0 is drawn at the bottom; the image's row 0 is its top
@@ -294,8 +313,8 @@ impl Highlight {
                 values: &flipped,
                 nx: w,
                 ny: h,
-                x_range: (-half.0, half.0),
-                y_range: (-half.1, half.1),
+                x_range: (x0, x1),
+                y_range: (y0, y1),
                 title: t.to_string(),
                 x_label: "X/L = tan θo cos φo".into(),
                 y_label: "Y/L".into(),
@@ -357,6 +376,12 @@ fn decode_png(bytes: &[u8]) -> Result<(usize, usize, Vec<f64>), String> {
     let frame = reader
         .next_frame(&mut buf)
         .map_err(|e| format!("the PNG's image data cannot be decoded: {e}"))?;
+    if (frame.width, frame.height) != (w, h) {
+        return Err(format!(
+            "an animated PNG (its first frame is {} × {} of {w} × {h}): give a single image",
+            frame.width, frame.height
+        ));
+    }
     let channels = frame.color_type.samples();
     let data = &buf[..frame.buffer_size()];
     let line = frame.line_size;
@@ -430,10 +455,10 @@ mod tests {
     /// ∝ J: its second moment is the closed form ∫₀ˢ s³J ds / ∫₀ˢ sJ ds, and nothing lies outside it.
     #[test]
     fn uniform_disc_is_slope_disc_of_predicted_radius() {
-        let beta = 20.0f64;
-        let h = disc(512, 30.0, beta);
+        let beta = 36.0f64;
+        let h = disc(512, 40.0, beta);
         let s_max = (beta.to_radians() / 2.0).tan();
-        let g = h.slope_grid(SlopeDomain::square(256, 0.3));
+        let g = h.slope_grid(SlopeDomain::square(256, 0.4));
         let d = g.domain;
         let (mut outside, mut m2) = (0.0, 0.0);
         for j in 0..d.ny {
@@ -458,8 +483,8 @@ mod tests {
         }
         let want = a / b;
         assert!((m2 - want).abs() < 0.01 * want, "E[s²] {m2} vs closed form {want}");
-        // uniform (J-free) would be s_max²/2; the Jacobian is visible at this size
-        assert!(((s_max * s_max / 2.0) - want).abs() > 0.02 * want);
+        // uniform (J-free) would be s_max²/2, 6.7% away: the Jacobian is plainly visible at this size
+        assert!(((s_max * s_max / 2.0) - want).abs() > 0.05 * want);
     }
 
     /// Casting a distribution back onto the screen gives the image again (the two maps are inverse).
@@ -467,11 +492,70 @@ mod tests {
     fn render_inverts_the_map() {
         let h = disc(256, 30.0, 18.0);
         let g = h.slope_grid(SlopeDomain::square(512, h.support_slope()));
-        let c = h.correlation(&g);
+        let c = h.correlation(&g, (0.0, 0.0));
         assert!(c > 0.97, "{c}");
         // and a different distribution does not correlate
         let other = SlopeGrid::from_fn(g.domain, |p, q| (-(p * p + q * q) / 0.0004).exp());
-        assert!(h.correlation(&other) < 0.8);
+        assert!(h.correlation(&other, (0.0, 0.0)) < 0.8);
+    }
+
+    /// A smooth image off-centre, asymmetric, of varying brightness: cast back from its slope grid it is the
+    /// same image pixel by pixel (so the Jacobian is divided out again and nothing is flipped or shifted),
+    /// and its light sits at the slopes the orientation convention says (top right of the image: facets
+    /// tilted towards +x and +y, p < 0 and q < 0).
+    #[test]
+    fn an_asymmetric_image_comes_back_pixel_for_pixel() {
+        let n = 200;
+        let t = 30f64.to_radians().tan() / (n as f64 / 2.0);
+        let mut px = vec![0.0; n * n];
+        for row in 0..n {
+            for col in 0..n {
+                let x = (col as f64 + 0.5 - n as f64 / 2.0) * t;
+                let y = (n as f64 / 2.0 - row as f64 - 0.5) * t;
+                px[row * n + col] = (-((x - 0.25).powi(2) + (y - 0.15).powi(2)) / 0.006).exp() * (1.0 + x)
+                    + 0.5 * (-((x + 0.2).powi(2) + (y + 0.25).powi(2)) / 0.003).exp();
+            }
+        }
+        let h = Highlight::from_luminance(Path::new("blobs"), n, n, px.clone(), 30.0).unwrap();
+        let g = h.slope_grid(SlopeDomain::square(600, h.support_slope()));
+        // the brighter blob is at the top right (x > 0, y > 0): its slopes are p < 0, q < 0
+        let d = g.domain;
+        let mut quadrant = 0.0;
+        for j in 0..d.ny {
+            for i in 0..d.nx {
+                if d.p_at(i) < 0.0 && d.q_at(j) < 0.0 {
+                    quadrant += g.at(i, j) * d.cell_area();
+                }
+            }
+        }
+        assert!(quadrant > 0.6, "mass at p < 0, q < 0: {quadrant}");
+        let (back, w, hh) = h.render(&g, (0.0, 0.0));
+        assert_eq!((w, hh), (n, n));
+        let max = px.iter().fold(0.0f64, |a, b| a.max(*b));
+        let mut worst = 0.0f64;
+        for (a, b) in px.iter().zip(&back) {
+            if *a > 0.1 * max {
+                worst = worst.max((b - a).abs() / a);
+            }
+        }
+        assert!(worst < 0.02, "largest relative error where the image is lit: {worst}");
+        // centroids agree to a tenth of a pixel
+        let centroid = |v: &[f64]| {
+            let (mut m, mut cx, mut cy) = (0.0, 0.0, 0.0);
+            for (k, a) in v.iter().enumerate() {
+                m += a;
+                cx += a * (k % n) as f64;
+                cy += a * (k / n) as f64;
+            }
+            (cx / m, cy / m)
+        };
+        let (a, b) = (centroid(&px), centroid(&back));
+        assert!((a.0 - b.0).abs() < 0.1 && (a.1 - b.1).abs() < 0.1, "{a:?} vs {b:?}");
+        // a tilt put back moves the rendering: the same grid shifted by the tilt the NDF stage would remove
+        let tilted = g.shifted(0.05, 0.0);
+        let (moved, _, _) = h.render(&tilted, (0.05, 0.0));
+        assert!(pearson(&moved, &px) > 0.999);
+        assert!(pearson(&h.render(&tilted, (0.0, 0.0)).0, &px) < 0.99);
     }
 
     /// `D` is normalised: `∫ D cosθ dω = ∫ P22 dp dq = 1`.
@@ -498,7 +582,9 @@ mod tests {
         assert_eq!((w, h), (2, 2));
         assert!((px[1] - 1.0).abs() < 1e-12 && px[0] == 0.0);
         assert!(decode_png(&png[..png.len() - 20]).is_err());
-        let e = Highlight::from_luminance(Path::new("b"), 2, 2, px, 85.0).unwrap_err();
+        let e = Highlight::from_luminance(Path::new("b"), 2, 2, px, 45.0).unwrap_err();
         assert!(e.contains("extent"), "{e}");
+        let e = Highlight::from_luminance(Path::new("thin"), 1000, 3, vec![1.0; 3000], 30.0).unwrap_err();
+        assert!(e.contains("too thin"), "{e}");
     }
 }

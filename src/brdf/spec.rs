@@ -14,7 +14,7 @@ fn err(spec: &str, reason: impl Into<String>) -> BrdfError {
 const KINDS: &str = "beckmann, ggx, ward, blinn, merl, rgl, csv, highlight";
 
 /// The default `extent_deg` of a `highlight:` spec: the angle of reflection at the middle of the image's
-/// longer edge, degrees.
+/// longer axis (the middles of its shorter edges), degrees.
 pub const DEFAULT_EXTENT_DEG: f64 = 30.0;
 
 /// Parse `kind:key=value,…` (analytic) or `kind:PATH,key=value,…` (measured).

@@ -17,7 +17,7 @@ pub struct Args {
     /// normal throws onto a screen parallel to the part, seen from above (docs/DESIGN.md §2.1)
     #[arg(long)]
     pub highlight: Option<PathBuf>,
-    /// With --highlight: the angle of reflection at the middle of the image's longer edge (degrees)
+    /// With --highlight: the angle of reflection at the ends of the image's longer axis (degrees, at most 40)
     #[arg(long, default_value_t = 30.0, requires = "highlight")]
     pub highlight_extent_deg: f64,
     /// With --highlight: the part's material (a preset name)

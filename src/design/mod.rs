@@ -292,7 +292,7 @@ fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale
             (1.0 - v) / (1.0 - lo).max(1e-9)
         }
     };
-    let highlight_corr = input.highlight.map(|h| h.correlation(&milled));
+    let highlight_corr = input.highlight.map(|h| h.correlation(&milled, (n.tilt.p, n.tilt.q)));
     let score = [
         band(cov_ratio[0]),
         band(cov_ratio[1]),

@@ -49,7 +49,7 @@ pub struct TargetSection {
     /// ([`crate::brdf::highlight`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub highlight: Option<String>,
-    /// The angle of reflection at the middle of the highlight image's longer edge, degrees.
+    /// The angle of reflection at the ends of the highlight image's longer axis, degrees.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub highlight_extent_deg: Option<f64>,
     /// The part's material with a `highlight` (a preset name, as in a BRDF spec's `material=`).

@@ -14,6 +14,8 @@ pub struct Compared {
     pub metrics: HighlightMetrics,
     /// The image beside the milled surface's highlight.
     pub figure: Figure,
+    /// What the user should know about the highlight's placement, if anything.
+    pub note: Option<String>,
 }
 
 /// The check a highlight adds to a surface's verdict.
@@ -26,20 +28,23 @@ fn check(corr: f64, tol: &Tolerances) -> Check {
     }
 }
 
-/// Render `observed`, `design` and `milled` in the image's configuration, add the check to both surfaces'
+/// Render the target's observed distribution (from `ndf`, with the tilt it removed), `design` and `milled`
+/// in the image's configuration, add the check to both surfaces'
 /// verdicts, and draw the figure.
 pub fn compare(
     h: &Highlight,
-    observed: &SlopeGrid,
+    ndf: &crate::ndf::Ndf,
     design: &SlopeGrid,
     milled: &SlopeGrid,
     design_m: &mut SurfaceMetrics,
     milled_m: &mut SurfaceMetrics,
     tol: &Tolerances,
 ) -> Compared {
-    let grid_corr = h.correlation(observed);
-    let design_corr = h.correlation(design);
-    let (rendered, w, hh) = h.render(milled);
+    let (tilt, observed) = (&ndf.tilt, &ndf.observed);
+    let t = (tilt.p, tilt.q);
+    let grid_corr = h.correlation(observed, t);
+    let design_corr = h.correlation(design, t);
+    let (rendered, w, hh) = h.render(milled, t);
     let (image, _, _) = h.compare_image();
     let milled_corr = crate::brdf::highlight::pearson(&image, &rendered);
     for (m, c) in [(design_m, design_corr), (milled_m, milled_corr)] {
@@ -56,7 +61,7 @@ pub fn compare(
     let figure = Figure::new(
         "Highlight",
         format!(
-            "Left, the highlight asked for ({}, {} × {} px, compared at {w} × {hh}); right, the light the simulated milled surface reflects in the same configuration: a collimated light along the normal and a screen parallel to the part, seen from above (image right = +x, up = +y), the middle of the longer edge at {}° of reflection. One linear colour scale, from zero to the image's brightest pixel (brighter rendered pixels drawn at its top). Correlation {milled_corr:.3} (the design tile's {design_corr:.3}; the target as the NDF grid holds it, the most any design could reach, {grid_corr:.3}).",
+            "Left, the highlight asked for ({}, {} × {} px, compared at {w} × {hh}); right, the light the simulated milled surface reflects in the same configuration: a collimated light along the normal and a screen parallel to the part, seen from above (image right = +x, up = +y), the ends of the image's longer axis at {}° of reflection. One linear colour scale, from zero to the image's brightest pixel (brighter rendered pixels drawn at its top). Correlation {milled_corr:.3} (the design tile's {design_corr:.3}; the target as the NDF grid holds it, the most any design could reach, {grid_corr:.3}).",
             h.path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default(),
             h.w,
             h.h,
@@ -76,6 +81,12 @@ pub fn compare(
             grid_corr,
         },
         figure,
+        note: (tilt.deg > 0.05).then(|| {
+            format!(
+                "The highlight is drawn off-centre: its mean facet slope ({:.4}, {:.4}), a tilt of {:.2}°, cannot be made by a tileable surface, whose mean slope is zero, so the part is designed level and shows the highlight where it was drawn when it is mounted tilted by {:.2}° (it is compared so); mounted level, the highlight is centred.",
+                tilt.p, tilt.q, tilt.deg, tilt.deg
+            )
+        }),
     }
 }
 

@@ -68,7 +68,7 @@ pub struct HighlightMetrics {
     pub image: String,
     /// Its size, pixels.
     pub size_px: [usize; 2],
-    /// The angle of reflection at the middle of its longer edge, degrees.
+    /// The angle of reflection at the ends of its longer axis, degrees.
     pub extent_deg: f64,
     /// The configuration the image and the renderings are in.
     pub configuration: String,

@@ -180,7 +180,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
     let highlight = input
         .target
         .highlight()
-        .map(|h| highlight::compare(h, &n.observed, &design, &milled, &mut design_m, &mut milled_m, &tol));
+        .map(|h| highlight::compare(h, n, &design, &milled, &mut design_m, &mut milled_m, &tol));
     let facets = input.tile.config.facets_x * input.tile.config.facets_y;
     let mut notes = explain::shortfall(&explain::Findings {
         milled: &milled_m,
@@ -211,6 +211,9 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         .filter(|h| h.milled_corr < tol.highlight_corr_min)
     {
         notes.push(highlight::why(h, &tol));
+    }
+    if let Some(note) = highlight.as_ref().and_then(|h| h.note.clone()) {
+        notes.push(note);
     }
     if let Some(w) = crate::ndf::grid_warning(input.ndf) {
         notes.push(format!("{w}."));
