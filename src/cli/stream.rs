@@ -1,5 +1,6 @@
 //! `brdfmill stream`: send a G-code program to a GRBL 1.1 controller (see `docs/STREAM.md`).
 
+use std::os::fd::AsFd;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
@@ -112,8 +113,14 @@ pub fn run(a: &Args) -> Result<()> {
         .context("cannot install the SIGUSR1 (hold) handler")?;
     signal_hook::flag::register(signal_hook::consts::SIGUSR2, Arc::clone(&resume))
         .context("cannot install the SIGUSR2 (resume) handler")?;
+    // Keys on a terminal raise the same flags; the listener restores the terminal when it is dropped, after
+    // the session on every way out.
+    let keys = brdfmill::stream::keys::Keys::listen(std::io::stdin().as_fd(), Arc::clone(&hold), Arc::clone(&resume))
+        .context("cannot read keys from the terminal")?;
+    let by_key = if keys.is_some() { "`!` or space, or " } else { "" };
+    let resume_key = if keys.is_some() { "`~` or Enter, or " } else { "" };
     eprintln!(
-        "streaming; hold: kill -USR1 {pid}, resume: kill -USR2 {pid}, stop: Ctrl-C",
+        "streaming; hold: {by_key}kill -USR1 {pid}; resume: {resume_key}kill -USR2 {pid}; stop: Ctrl-C",
         pid = std::process::id()
     );
     let bar = indicatif::ProgressBar::new(program.sendable().count() as u64);
@@ -130,6 +137,7 @@ pub fn run(a: &Args) -> Result<()> {
         resume: &resume,
     };
     let outcome = session::run_with(&mut link, &program, &cfg, &journal, mode, &mut obs, controls);
+    drop(keys);
     obs.bar.finish_and_clear();
     match outcome? {
         Outcome::Completed(s) => {

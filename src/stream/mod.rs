@@ -11,6 +11,7 @@
 
 pub mod emulator;
 pub mod journal;
+pub mod keys;
 /// The program model the streamer reads (the crate's one annotated G-code program, [`crate::gcode::program`]).
 pub use crate::gcode::program;
 pub mod protocol;

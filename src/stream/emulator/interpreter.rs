@@ -20,6 +20,8 @@ const GROUP_ARC_DISTANCE: u8 = 104;
 const GROUP_CUTTER_COMP: u8 = 107;
 /// G modal group 8 (tool length offset), numbered apart from the M groups.
 const GROUP_TOOL_LENGTH: u8 = 108;
+/// G modal group 13 (path control mode), numbered apart from the M groups.
+const GROUP_CONTROL_MODE: u8 = 113;
 
 /// GRBL's non-modal commands of group 0 that the emulator models (G4 is `Parsed::dwell`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -184,7 +186,11 @@ impl Parsed {
                 self.non_modal = Some(nm);
             }
             (28 | 30 | 92, _) => return Err(20),
-            (38 | 61, _) => {
+            // G61 (exact path) is GRBL's only path control mode: accepted and does nothing; G61.1 and G64
+            // are not supported (error:20)
+            (61, 0) => self.group(GROUP_CONTROL_MODE)?,
+            (61, _) => return Err(20),
+            (38, _) => {
                 self.unmodelled = Some(format!("G{v}"));
             }
             (_, 0) => return Err(20),

@@ -36,6 +36,16 @@ fn answers_like_grbl() {
         "G91.1 accepted, then no feed"
     );
     assert_eq!(send(&mut c, "G90.1\n"), "error:20\r\n");
+    // G61 is 1.1h's only path control mode: accepted (group 13); G61.1 and G64 are not
+    assert_eq!(send(&mut c, "G61\n"), "ok\r\n");
+    assert_eq!(send(&mut c, "G61G90G21\n"), "ok\r\n");
+    assert_eq!(
+        send(&mut c, "G61G61\n"),
+        "error:21\r\n",
+        "one path control word per block"
+    );
+    assert_eq!(send(&mut c, "G61.1\n"), "error:20\r\n");
+    assert_eq!(send(&mut c, "G64\n"), "error:20\r\n");
     assert_eq!(send(&mut c, "M7\n"), "error:20\r\n", "no ENABLE_M7 on a default build");
     // the machinist's safety line, and its cutter-compensation word beside a spindle word (G and M groups
     // are numbered apart)
