@@ -291,8 +291,8 @@ impl Highlight {
         pearson(&a, &b)
     }
 
-    /// The report's figure: the image and a rendered highlight side by side on one linear colour scale (the
-    /// image's brightest pixel at its top), axes in screen units `X/L = tan θo cos φo`.
+    /// The report's figure: the image and a rendered highlight side by side on one linear colour scale
+    /// topped at the image's brightest pixel, axes in screen units `X/L = tan θo cos φo`.
     pub fn figure(&self, rendered: &[f64], title: &str) -> crate::plot::Canvas {
         let (f, w, h) = self.compare_size();
         let (img, _, _) = self.compare_image();

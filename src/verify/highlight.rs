@@ -61,7 +61,7 @@ pub fn compare(
     let figure = Figure::new(
         "Highlight",
         format!(
-            "Left, the highlight asked for ({}, {} × {} px, compared at {w} × {hh}); right, the light the simulated milled surface reflects in the same configuration: a collimated light along the normal and a screen parallel to the part, seen from above (image right = +x, up = +y), the ends of the image's longer axis at {}° of reflection. One linear colour scale, from zero to the image's brightest pixel (brighter rendered pixels drawn at its top). Correlation {milled_corr:.3} (the design tile's {design_corr:.3}; the target as the NDF grid holds it, the most any design could reach, {grid_corr:.3}).",
+            "Left, the highlight asked for ({}, {} × {} px, compared at {w} × {hh}); right, the light the simulated milled surface reflects in the same configuration: a collimated light along the normal and a screen parallel to the part, seen from above (image right = +x, up = +y), the ends of the image's longer axis at {}° of reflection. One linear colour scale, topped at the image's brightest pixel (brighter rendered pixels drawn at the top). Correlation {milled_corr:.3} (the design tile's {design_corr:.3}; the target as the NDF grid holds it, the most any design could reach, {grid_corr:.3}).",
             h.path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default(),
             h.w,
             h.h,
