@@ -559,6 +559,92 @@ fn a_soft_limit_stops_at_once_and_the_resume_stays_inside_travel() {
     assert!(log.received.iter().any(|l| l == "G0Z0"), "{:?}", log.received);
 }
 
+/// Declines the reset after an alarm, and remembers what it was asked.
+#[derive(Default)]
+struct LeaveInAlarm {
+    asked: Vec<String>,
+}
+impl Observer for LeaveInAlarm {
+    fn reset_after_alarm(&mut self, alarm: &str) -> bool {
+        self.asked.push(alarm.to_string());
+        false
+    }
+}
+
+/// Issue 14: asked before the reset after a critical alarm, a user who says no gets a controller left in
+/// alarm: nothing more reaches it (no reset, no line), the stop says so, and a later `--resume` resets it,
+/// reads where motion stopped and finishes the job with every motion line run exactly once.
+#[test]
+fn a_user_can_leave_the_controller_in_alarm_and_resume_later() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut text = String::from("G21G90\nG0X-10Y-10Z-1\nG1Z-3F300\n");
+    for i in 0..20 {
+        text += &format!("G1X{}Y{}\n", -10 - (i % 2) * 8, -11 - i);
+    }
+    text += "G0Z-1\n";
+    let prog = program(dir.path(), "neg.nc", &text);
+    let emu = Emulator::start(EmulatorConfig {
+        baud: 1_000_000,
+        time_scale: 8.0,
+        faults: vec![Fault {
+            at: FaultAt::LineNumber(15),
+            kind: FaultKind::Alarm(2),
+        }],
+        ..EmulatorConfig::default()
+    })
+    .unwrap();
+    let journal = dir.path().join("j");
+    let port = emu.port_path().expect("port up");
+    let mut link = SerialLink::open(&port, 1_000_000).unwrap();
+    let mut obs = LeaveInAlarm::default();
+    let first = session::run(
+        &mut link,
+        &prog,
+        &patient_config(),
+        &journal,
+        Mode::Fresh,
+        &mut obs,
+        &AtomicBool::new(false),
+    )
+    .unwrap();
+    drop(link);
+    let Outcome::Stopped(r, _) = first else {
+        panic!("the alarm did not stop the job: {first:?}")
+    };
+    assert_eq!(r.reason, StopReason::Alarm(2));
+    assert_eq!(obs.asked.len(), 1, "asked once: {:?}", obs.asked);
+    assert!(
+        obs.asked[0].starts_with("ALARM:2") && obs.asked[0].contains("travel"),
+        "{:?}",
+        obs.asked
+    );
+    assert!(r.message.contains("left in alarm"), "{}", r.message);
+    let log = emu.log();
+    let alarm_at = log
+        .events
+        .iter()
+        .position(|e| e.starts_with("ALARM:2"))
+        .expect("the alarm");
+    assert!(
+        !log.events[alarm_at..].iter().any(|e| e.contains("soft reset")),
+        "reset although the user said no: {:?}",
+        log.events
+    );
+    let second = stream_patiently(&emu, 1_000_000, &prog, &journal, Mode::Resume);
+    assert!(matches!(second, Outcome::Completed(_)), "{second:?}");
+    let log = emu.log();
+    assert_eq!(
+        log.events.iter().filter(|e| e.starts_with("ALARM:2")).count(),
+        1,
+        "{:?}",
+        log.events
+    );
+    let ambiguous = std::fs::read_to_string(&journal)
+        .unwrap()
+        .contains("\"event\":\"ambiguous\"");
+    assert_exactly_once(&prog, &log.executed, 0.01, 0, ambiguous);
+}
+
 /// Raises the hold flag when `at` lines have been answered, watches the controller settle at `Hold:0`
 /// and stay there (the same position over `still` reports), then raises the resume flag.
 struct HoldThenResume<'a> {

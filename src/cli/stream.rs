@@ -53,6 +53,10 @@ pub struct Args {
 
 struct Bar {
     bar: indicatif::ProgressBar,
+    /// The keys typed, when the streamer reads a terminal: the alarm's question is asked there.
+    keys: Option<std::sync::mpsc::Receiver<u8>>,
+    /// Ctrl-C.
+    stop: Arc<AtomicBool>,
 }
 
 impl Observer for Bar {
@@ -65,6 +69,32 @@ impl Observer for Bar {
             .map_or(String::new(), |q| format!(" X{:.3} Y{:.3} Z{:.3}", q[0], q[1], q[2]));
         let eta = p.eta.map_or(String::new(), |e| format!(" ETA {}s", e.as_secs()));
         self.bar.set_message(format!("{state}{pos}{eta}"));
+    }
+    fn reset_after_alarm(&mut self, alarm: &str) -> bool {
+        use std::sync::mpsc::RecvTimeoutError;
+        let Some(keys) = &self.keys else {
+            return true; // no terminal to ask: reset, as a script expects
+        };
+        while keys.try_recv().is_ok() {} // what was typed before the alarm answers nothing
+        self.bar.println(format!(
+            "{alarm}\nMotion has stopped. Reset the controller now (it answers nothing until reset)? Enter or y: reset; n or Ctrl-C: leave it in alarm"
+        ));
+        loop {
+            if self.stop.load(Ordering::SeqCst) {
+                self.bar.println("left in alarm (Ctrl-C)");
+                return false;
+            }
+            match keys.recv_timeout(Duration::from_millis(100)) {
+                Ok(b'y' | b'Y' | b'\r' | b'\n') => return true,
+                Ok(b'n' | b'N') => {
+                    self.bar.println("left in alarm");
+                    return false;
+                }
+                Ok(_) | Err(RecvTimeoutError::Timeout) => {}
+                // the terminal went away: nobody to ask
+                Err(RecvTimeoutError::Disconnected) => return true,
+            }
+        }
     }
     fn note(&mut self, msg: &str) {
         self.bar.println(msg);
@@ -115,8 +145,9 @@ pub fn run(a: &Args) -> Result<()> {
         .context("cannot install the SIGUSR2 (resume) handler")?;
     // Keys on a terminal raise the same flags; the listener restores the terminal when it is dropped, after
     // the session on every way out.
-    let keys = brdfmill::stream::keys::Keys::listen(std::io::stdin().as_fd(), Arc::clone(&hold), Arc::clone(&resume))
-        .context("cannot read keys from the terminal")?;
+    let mut keys =
+        brdfmill::stream::keys::Keys::listen(std::io::stdin().as_fd(), Arc::clone(&hold), Arc::clone(&resume))
+            .context("cannot read keys from the terminal")?;
     let by_key = if keys.is_some() { "`!` or space, or " } else { "" };
     let resume_key = if keys.is_some() { "`~` or Enter, or " } else { "" };
     eprintln!(
@@ -129,7 +160,11 @@ pub fn run(a: &Args) -> Result<()> {
             .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
     );
     bar.enable_steady_tick(Duration::from_millis(250));
-    let mut obs = Bar { bar };
+    let mut obs = Bar {
+        bar,
+        keys: keys.as_mut().and_then(|k| k.take_input()),
+        stop: Arc::clone(&stop),
+    };
     let mode = if a.resume { Mode::Resume } else { Mode::Fresh };
     let controls = session::Controls {
         stop: &stop,

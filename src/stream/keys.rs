@@ -7,7 +7,9 @@
 //!   `Hold:0`, and streaming goes on into the controller's buffer);
 //! - `~` or Enter: cycle start after the hold (the flag of `SIGUSR2`).
 //!
-//! Any other key is ignored. The keys only raise the session's flags ([`super::session::Controls`]): the
+//! Every byte read is also passed on ([`Keys::take_input`]), so the streamer can ask the user a question
+//! (whether to reset after an alarm) without a second reader on the terminal. Other keys raise nothing.
+//! The keys only raise the session's flags ([`super::session::Controls`]): the
 //! session sends the realtime bytes and decides what executed, so a key can never put a byte on the wire
 //! that the session did not choose. Dropping the [`Keys`] stops the thread and restores the terminal as it
 //! was, on every way out of the job (completion, an error, Ctrl-C).
@@ -15,6 +17,7 @@
 use nix::sys::termios::{self, LocalFlags, SetArg, SpecialCharacterIndices, Termios};
 use std::os::fd::{AsFd, BorrowedFd, OwnedFd};
 use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{Receiver, Sender};
 use std::sync::Arc;
 use std::thread::JoinHandle;
 
@@ -42,6 +45,7 @@ pub struct Keys {
     saved: Termios,
     quit: Arc<AtomicBool>,
     thread: Option<JoinHandle<()>>,
+    input: Option<Receiver<u8>>,
 }
 
 impl Keys {
@@ -62,20 +66,27 @@ impl Keys {
         let quit = Arc::new(AtomicBool::new(false));
         let reader = fd.try_clone()?;
         let q = Arc::clone(&quit);
+        let (tx, rx) = std::sync::mpsc::channel();
         let thread = std::thread::Builder::new()
             .name("keys".into())
-            .spawn(move || read_keys(reader, &q, &hold, &resume))?;
+            .spawn(move || read_keys(reader, &q, &hold, &resume, &tx))?;
         Ok(Some(Self {
             fd,
             saved,
             quit,
             thread: Some(thread),
+            input: Some(rx),
         }))
+    }
+
+    /// Every byte typed from now on (once: the first call takes them).
+    pub fn take_input(&mut self) -> Option<Receiver<u8>> {
+        self.input.take()
     }
 }
 
 /// Poll `fd` every 100 ms until `quit`, raising the flags for the keys read.
-fn read_keys(fd: OwnedFd, quit: &AtomicBool, hold: &AtomicBool, resume: &AtomicBool) {
+fn read_keys(fd: OwnedFd, quit: &AtomicBool, hold: &AtomicBool, resume: &AtomicBool, input: &Sender<u8>) {
     use nix::poll::{poll, PollFd, PollFlags, PollTimeout};
     let mut buf = [0u8; 64];
     while !quit.load(Ordering::SeqCst) {
@@ -93,6 +104,9 @@ fn read_keys(fd: OwnedFd, quit: &AtomicBool, hold: &AtomicBool, resume: &AtomicB
         match nix::unistd::read(std::os::fd::AsRawFd::as_raw_fd(&fd), &mut buf) {
             Ok(0) => return,
             Ok(n) => {
+                buf[..n].iter().for_each(|b| {
+                    let _ = input.send(*b);
+                });
                 for k in buf[..n].iter().filter_map(|b| key_of(*b)) {
                     match k {
                         Key::Hold => hold.store(true, Ordering::SeqCst),
@@ -144,9 +158,11 @@ mod tests {
             "a fresh pty is line-buffered"
         );
         let (hold, resume) = (Arc::new(AtomicBool::new(false)), Arc::new(AtomicBool::new(false)));
-        let keys = Keys::listen(pty.slave.as_fd(), Arc::clone(&hold), Arc::clone(&resume))
+        let mut keys = Keys::listen(pty.slave.as_fd(), Arc::clone(&hold), Arc::clone(&resume))
             .unwrap()
             .expect("a pty is a terminal");
+        let input = keys.take_input().expect("the typed bytes");
+        assert!(keys.take_input().is_none(), "taken once");
         let during = termios::tcgetattr(pty.slave.as_fd()).unwrap();
         assert!(!during.local_flags.contains(LocalFlags::ICANON) && !during.local_flags.contains(LocalFlags::ECHO));
         assert!(
@@ -164,6 +180,11 @@ mod tests {
         assert!(wait_for(&hold), "space holds");
         type_(b"\r");
         assert!(wait_for(&resume), "Enter resumes");
+        // every byte is passed on, in order (Enter arrives as a newline: the terminal maps CR to NL)
+        let got: Vec<u8> = input.try_iter().collect();
+        assert_eq!(got.len(), 5, "{got:?}");
+        assert_eq!(&got[..4], b"x!~ ");
+        assert!(matches!(got[4], b'\r' | b'\n'), "{got:?}");
         drop(keys);
         let after = termios::tcgetattr(pty.slave.as_fd()).unwrap();
         assert_eq!(after.local_flags, before.local_flags);

@@ -28,12 +28,19 @@ struct Probe {
     reset_sent: bool,
     first_status_at: Option<Instant>,
     resend_at: Option<Instant>,
+    /// When the probe was first sent.
+    started: Option<Instant>,
 }
+
+/// How long a controller may stay silent to `$I` and `?` before it is taken for one locked in a critical
+/// alarm (GRBL 1.1h answers `?` in every other state) and soft-reset once.
+const SILENT_LOCKED: Duration = Duration::from_millis(1500);
 
 impl Session<'_> {
     /// Wake the controller and identify it: `\r\n\r\n`, then `$I` (expects `[VER:1.1…]`, `[OPT:…]`, `ok`)
     /// and `?`. A banner in between means the board just reset: the probe is repeated. A controller
-    /// locked in a critical alarm answers only `?`; it is soft-reset once (motion has stopped in alarm).
+    /// locked in a critical alarm answers nothing, or (other builds) only `?` with `Alarm`; either way it is
+    /// soft-reset once (motion has stopped in alarm).
     pub(super) fn handshake(&mut self) -> Result<Info, StreamError> {
         let deadline = Instant::now() + self.cfg.handshake_timeout;
         let mut info = Info {
@@ -55,6 +62,7 @@ impl Session<'_> {
             if !probe.sent {
                 self.write(b"$I\n?").map_err(|f| self.link_err("handshake", f))?;
                 probe.sent = true;
+                probe.started.get_or_insert_with(Instant::now);
             }
             let now = Instant::now();
             if now >= deadline {
@@ -82,17 +90,29 @@ impl Session<'_> {
         }
     }
 
-    /// Nothing came: a controller locked in a critical alarm does not process `$I`, but answers `?`.
-    /// After half a second of that, soft-reset it once.
+    /// Nothing came: a controller locked in a critical alarm does not process `$I`; 1.1h answers nothing at
+    /// all, not even `?` (a streamer left it so when the user declined the reset after the alarm), and
+    /// other builds answer `?` with `Alarm`. After [`SILENT_LOCKED`] of silence, or half a second of
+    /// `Alarm` reports, soft-reset it once: in either case motion has stopped.
     fn reset_if_locked(&mut self, probe: &mut Probe, info: &mut Info) -> Result<(), StreamError> {
-        if let (Some(t), Some(st)) = (probe.first_status_at, &info.status) {
-            if st.state == Some(MachineState::Alarm) && !probe.reset_sent && t.elapsed() > Duration::from_millis(500) {
-                self.write(&[Realtime::SoftReset.byte()])
-                    .map_err(|f| self.link_err("reset", f))?;
-                self.reset_sent = true;
-                probe.reset_sent = true;
-                info.critical = true;
+        if probe.reset_sent {
+            return Ok(());
+        }
+        let alarm_reports = match (probe.first_status_at, &info.status) {
+            (Some(t), Some(st)) => st.state == Some(MachineState::Alarm) && t.elapsed() > Duration::from_millis(500),
+            _ => false,
+        };
+        let silent = self.saw.is_empty() && probe.started.is_some_and(|t| t.elapsed() > SILENT_LOCKED);
+        if alarm_reports || silent {
+            if silent {
+                self.observer
+                    .note("the controller answers nothing, as GRBL 1.1h in a critical alarm: soft reset");
             }
+            self.write(&[Realtime::SoftReset.byte()])
+                .map_err(|f| self.link_err("reset", f))?;
+            self.reset_sent = true;
+            probe.reset_sent = true;
+            info.critical = true;
         }
         Ok(())
     }

@@ -29,6 +29,13 @@ pub trait Observer {
     fn progress(&mut self, _p: &Progress) {}
     /// Something worth telling the user (a message from the controller, an error carried over).
     fn note(&mut self, _msg: &str) {}
+    /// Asked before the soft reset that follows a critical alarm (`alarm` says which and what to check).
+    /// Motion has already stopped; the reset only lets the controller answer again. `false` leaves the
+    /// controller in alarm, and nothing more is sent: a `--resume` resets it later and reads where motion
+    /// stopped. The default resets.
+    fn reset_after_alarm(&mut self, _alarm: &str) -> bool {
+        true
+    }
 }
 
 /// An observer that ignores everything.

@@ -88,8 +88,8 @@ impl Session<'_> {
         self.stream(queue)
     }
 
-    /// The last run ended without knowing what ran (a disconnect): the position tells. Journals what is
-    /// found and adds it to `st`.
+    /// The last run ended without knowing what ran (a disconnect, or an alarm the user left unreset): the
+    /// position tells. Journals what is found and adds it to `st`.
     fn locate_after_disconnect(
         &mut self,
         journal_path: &Path,
@@ -115,8 +115,11 @@ impl Session<'_> {
             // Before anything moved the tool is where the first run found it.
             origin: if moved { None } else { st.origin },
             // Idle with nothing executing: the controller finished what it had, so motion ended at the
-            // end of a block.
-            at_rest: status.state == Some(MachineState::Idle) && status.line.is_none(),
+            // end of a block. Not after an alarm: it stopped motion wherever it was, and the controller is
+            // Idle only because it was reset and unlocked.
+            at_rest: status.state == Some(MachineState::Idle)
+                && status.line.is_none()
+                && !matches!(&st.stop, Some(Record::Stop { reason, .. }) if reason == "alarm"),
         };
         let loc =
             locate(program, &candidates, &ev, self.cfg.position_tolerance_mm).map_err(|what| StreamError::Resume {

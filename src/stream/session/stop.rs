@@ -168,6 +168,16 @@ impl Session<'_> {
                 Err(e) => notes.push(format!("{e}; resetting to stop it")),
             }
         }
+        if let Fault::Alarm(code) = fault {
+            let what = format!("ALARM:{code} ({}){}", alarm_text(*code), alarm_advice(*code));
+            if !self.observer.reset_after_alarm(&what) {
+                return (
+                    None,
+                    None,
+                    Some("left in alarm, as asked: nothing was reset or sent after the alarm, and the controller answers nothing until it is reset (Ctrl-X); `--resume` resets it and reads where motion stopped".into()),
+                );
+            }
+        }
         self.reset_sent = true;
         if let Err(e) = self.reset_flushing(alarm) {
             notes.push(e);
