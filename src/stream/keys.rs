@@ -104,14 +104,15 @@ fn read_keys(fd: OwnedFd, quit: &AtomicBool, hold: &AtomicBool, resume: &AtomicB
         match nix::unistd::read(std::os::fd::AsRawFd::as_raw_fd(&fd), &mut buf) {
             Ok(0) => return,
             Ok(n) => {
-                buf[..n].iter().for_each(|b| {
-                    let _ = input.send(*b);
-                });
-                for k in buf[..n].iter().filter_map(|b| key_of(*b)) {
-                    match k {
-                        Key::Hold => hold.store(true, Ordering::SeqCst),
-                        Key::Resume => resume.store(true, Ordering::SeqCst),
+                // each key's flag is raised before the key is passed on, so whoever reads the byte also
+                // sees its effect
+                for b in &buf[..n] {
+                    match key_of(*b) {
+                        Some(Key::Hold) => hold.store(true, Ordering::SeqCst),
+                        Some(Key::Resume) => resume.store(true, Ordering::SeqCst),
+                        None => {}
                     }
+                    let _ = input.send(*b);
                 }
             }
             Err(nix::errno::Errno::EINTR | nix::errno::Errno::EAGAIN) => {}
@@ -134,21 +135,10 @@ impl Drop for Keys {
 mod tests {
     use super::*;
     use std::os::fd::AsRawFd;
-    use std::time::{Duration, Instant};
 
-    fn wait_for(flag: &AtomicBool) -> bool {
-        let t = Instant::now();
-        while t.elapsed() < Duration::from_secs(10) {
-            if flag.swap(false, Ordering::SeqCst) {
-                return true;
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        }
-        false
-    }
-
-    /// Keys typed on a terminal raise the flags, other keys do not, and dropping the listener leaves the
-    /// terminal's modes as they were.
+    /// Keys typed on a terminal raise the flags, other keys do not, every byte is passed on in order, and
+    /// dropping the listener leaves the terminal's modes as they were. The test waits for each key by
+    /// receiving it (its flag is raised before it is passed on), not by a clock.
     #[test]
     fn keys_on_a_terminal_raise_hold_and_resume_and_the_terminal_is_restored() {
         let pty = nix::pty::openpty(None, None).unwrap();
@@ -169,22 +159,24 @@ mod tests {
             during.local_flags.contains(LocalFlags::ISIG),
             "Ctrl-C must stay a signal"
         );
-        let type_ = |s: &[u8]| nix::unistd::write(&pty.master, s).unwrap();
-        type_(b"x");
-        type_(b"!");
-        assert!(wait_for(&hold), "`!` holds");
-        assert!(!resume.load(Ordering::SeqCst), "`x` and `!` do not resume");
-        type_(b"~");
-        assert!(wait_for(&resume), "`~` resumes");
-        type_(b" ");
-        assert!(wait_for(&hold), "space holds");
-        type_(b"\r");
-        assert!(wait_for(&resume), "Enter resumes");
-        // every byte is passed on, in order (Enter arrives as a newline: the terminal maps CR to NL)
-        let got: Vec<u8> = input.try_iter().collect();
-        assert_eq!(got.len(), 5, "{got:?}");
-        assert_eq!(&got[..4], b"x!~ ");
-        assert!(matches!(got[4], b'\r' | b'\n'), "{got:?}");
+        // type one key, take it from the listener, and say which flags it raised
+        let press = |k: &[u8]| -> (u8, bool, bool) {
+            nix::unistd::write(&pty.master, k).unwrap();
+            let b = input.recv().expect("the listener passes every key on");
+            (
+                b,
+                hold.swap(false, Ordering::SeqCst),
+                resume.swap(false, Ordering::SeqCst),
+            )
+        };
+        assert_eq!(press(b"x"), (b'x', false, false), "other keys raise nothing");
+        assert_eq!(press(b"!"), (b'!', true, false), "`!` holds");
+        assert_eq!(press(b"~"), (b'~', false, true), "`~` resumes");
+        assert_eq!(press(b" "), (b' ', true, false), "space holds");
+        // Enter arrives as a newline where the terminal maps CR to NL
+        let (b, h, r) = press(b"\r");
+        assert!(matches!(b, b'\r' | b'\n') && !h && r, "Enter resumes: {b} {h} {r}");
+        assert!(input.try_recv().is_err(), "one byte per key");
         drop(keys);
         let after = termios::tcgetattr(pty.slave.as_fd()).unwrap();
         assert_eq!(after.local_flags, before.local_flags);
