@@ -131,6 +131,32 @@ impl Controller {
         [c[0] + g92[0], c[1] + g92[1], c[2] + g92[2] + tlo]
     }
 
+    /// The machine target of a block's axis words (`None`: the axis stays), in mm once scaled by `k` (25.4
+    /// for inches): machine coordinates for G53, else relative to the parser position when `incremental`,
+    /// else work coordinates through `wco`. Shared by G-code blocks and `$J=` jogs.
+    pub(super) fn axis_target(
+        &self,
+        axis: [Option<f64>; 3],
+        k: f64,
+        machine: bool,
+        incremental: bool,
+        wco: [f64; 3],
+    ) -> [f64; 3] {
+        let mut target = self.parser_pos;
+        for (i, t) in target.iter_mut().enumerate() {
+            if let Some(v) = axis[i] {
+                *t = if machine {
+                    v * k
+                } else if incremental {
+                    *t + v * k
+                } else {
+                    v * k + wco[i]
+                };
+            }
+        }
+        target
+    }
+
     /// Soft limits are on (`$20=1`) and machine position `t` lies outside the travel `[−$13x, 0]`.
     pub(super) fn beyond_soft_limits(&self, t: [f64; 3]) -> bool {
         self.setting(20) == 1.0 && (0..3).any(|i| t[i] > 0.0 || t[i] < -self.setting(130 + i as u16))

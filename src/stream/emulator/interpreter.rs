@@ -382,19 +382,13 @@ impl Controller {
         let (coord, g92, stored, tlo) = self.offsets_after(&parsed, select, k);
         // the axis words as a target: machine mm for G53, else work coordinates through the block's system
         // (a G10 that changes `coord` uses up the block's axis words, so the old table serves the target)
-        let wco = self.wco_of(select, g92, tlo);
-        let mut target = self.parser_pos;
-        for (i, t) in target.iter_mut().enumerate() {
-            if let Some(v) = parsed.axis[i] {
-                *t = if parsed.non_modal == Some(NonModal::Machine) {
-                    v * k
-                } else if m.distance == Distance::Incremental {
-                    *t + v * k
-                } else {
-                    v * k + wco[i]
-                };
-            }
-        }
+        let target = self.axis_target(
+            parsed.axis,
+            k,
+            parsed.non_modal == Some(NonModal::Machine),
+            m.distance == Distance::Incremental,
+            self.wco_of(select, g92, tlo),
+        );
         let consumed =
             matches!(parsed.non_modal, Some(NonModal::SetCoord | NonModal::SetOffset)) || parsed.tool_length.is_some();
         let moves = if consumed {

@@ -223,19 +223,7 @@ impl Controller {
             return Reply::Error(22);
         };
         let k = if inch { 25.4 } else { 1.0 };
-        let wco = self.wco();
-        let mut target = self.parser_pos;
-        for (i, t) in target.iter_mut().enumerate() {
-            if let Some(v) = axis[i] {
-                *t = if machine {
-                    v * k
-                } else if incremental {
-                    *t + v * k
-                } else {
-                    v * k + wco[i]
-                };
-            }
-        }
+        let target = self.axis_target(axis, k, machine, incremental, self.wco());
         if self.beyond_soft_limits(target) {
             return Reply::Error(15);
         }
