@@ -68,6 +68,26 @@ pub struct Highlight {
     smith: SmithTable,
 }
 
+/// The `highlight:` spec of an image with an optional extent and material (a job's `target.highlight`, or
+/// `brdfmill ndf --highlight`). The error says which value a spec cannot hold: a path with a comma, or a
+/// material that is not a bare name.
+pub fn spec(path: &str, extent_deg: Option<f64>, material: Option<&str>) -> Result<String, String> {
+    if path.contains(',') {
+        return Err(format!("the image path `{path}` must not contain a comma"));
+    }
+    let mut spec = format!("highlight:{path}");
+    if let Some(e) = extent_deg {
+        spec.push_str(&format!(",extent_deg={e}"));
+    }
+    if let Some(m) = material {
+        if m.contains(',') || m.contains('=') {
+            return Err(format!("the material `{m}` is not a material name"));
+        }
+        spec.push_str(&format!(",material={m}"));
+    }
+    Ok(spec)
+}
+
 /// The Jacobian `|∂(X, Y)/∂(p, q)|` of the slope → screen map at `s² = p² + q²` (module docs).
 #[inline]
 pub fn jacobian(s2: f64) -> f64 {
@@ -564,6 +584,21 @@ mod tests {
         let h = disc(128, 30.0, 25.0);
         let g = SlopeGrid::from_fn(SlopeDomain::square(800, 0.35), |p, q| h.p22(p, q));
         assert!((g.mass() - 1.0).abs() < 0.01, "{}", g.mass());
+    }
+
+    /// The spec a job or the command line builds: extent and material appended, and the values a spec
+    /// cannot hold refused.
+    #[test]
+    fn spec_of_a_highlight() {
+        assert_eq!(
+            spec("s.png", Some(25.0), Some("gold")).unwrap(),
+            "highlight:s.png,extent_deg=25,material=gold"
+        );
+        assert_eq!(spec("s.png", None, None).unwrap(), "highlight:s.png");
+        assert!(spec("a,b.png", None, None).unwrap_err().contains("comma"));
+        assert!(spec("s.png", None, Some("gold,eta=2"))
+            .unwrap_err()
+            .contains("not a material name"));
     }
 
     /// Bad images get errors that say what is wrong.

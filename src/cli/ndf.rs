@@ -65,16 +65,12 @@ pub fn run(a: &Args) -> Result<()> {
     let brdf = match (&a.brdf, &a.highlight) {
         (Some(spec), _) => Brdf::parse(spec).context("--brdf")?,
         (None, Some(path)) => {
-            let p = path.display().to_string();
-            anyhow::ensure!(!p.contains(','), "--highlight {p}: the path must not contain a comma");
-            let mut spec = format!("highlight:{p},extent_deg={}", a.highlight_extent_deg);
-            if let Some(m) = &a.material {
-                anyhow::ensure!(
-                    !m.contains(',') && !m.contains('='),
-                    "--material `{m}` is not a material name"
-                );
-                spec.push_str(&format!(",material={m}"));
-            }
+            let spec = brdfmill::brdf::highlight::spec(
+                &path.display().to_string(),
+                Some(a.highlight_extent_deg),
+                a.material.as_deref(),
+            )
+            .map_err(|e| anyhow::anyhow!("--highlight: {e}"))?;
             Brdf::parse(&spec).context("--highlight")?
         }
         (None, None) => anyhow::bail!("give --brdf SPEC or --highlight PNG"),

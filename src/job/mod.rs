@@ -308,21 +308,8 @@ fn target_spec(t: &TargetSection, dir: &Path) -> Result<(&'static str, String), 
             Ok(("target.brdf", resolve_spec(&t.brdf, dir)))
         }
         (Some(path), true) => {
-            if path.contains(',') {
-                return Err(format!(
-                    "`target.highlight` = `{path}`: the path must not contain a comma"
-                ));
-            }
-            let mut spec = format!("highlight:{path}");
-            if let Some(e) = t.highlight_extent_deg {
-                spec.push_str(&format!(",extent_deg={e}"));
-            }
-            if let Some(m) = &t.material {
-                if m.contains(',') || m.contains('=') {
-                    return Err(format!("`target.material` = `{m}` is not a material name"));
-                }
-                spec.push_str(&format!(",material={m}"));
-            }
+            let spec = crate::brdf::highlight::spec(path, t.highlight_extent_deg, t.material.as_deref())
+                .map_err(|e| format!("`target.highlight`: {e}"))?;
             Ok(("target.highlight", resolve_spec(&spec, dir)))
         }
     }
