@@ -66,6 +66,8 @@ pub struct Highlight {
     norm: f64,
     /// Smith Λ of the distribution, for the masking term.
     smith: SmithTable,
+    /// The image box-averaged to the comparison size ([`Highlight::compare_image`]), made once.
+    compare: Vec<f64>,
 }
 
 /// The `highlight:` spec of an image with an optional extent and material (a job's `target.highlight`, or
@@ -167,7 +169,9 @@ impl Highlight {
             pixel_tan,
             norm: 1.0 / (sum * pixel_tan * pixel_tan),
             smith: SmithTable::new(&SlopeGrid::from_fn(SlopeDomain::square(8, 0.1), |_, _| 1.0), 8, 4),
+            compare: Vec::new(),
         };
+        out.compare = out.box_averaged();
         let support = out.support_slope();
         let grid = out.slope_grid(SlopeDomain::square(256, support * 1.02));
         out.smith = SmithTable::new(&grid, 64, 32);
@@ -258,7 +262,13 @@ impl Highlight {
     }
 
     /// The image at the comparison size (row-major, top row first), and its width and height.
-    pub fn compare_image(&self) -> (Vec<f64>, usize, usize) {
+    pub fn compare_image(&self) -> (&[f64], usize, usize) {
+        let (_, w, h) = self.compare_size();
+        (&self.compare, w, h)
+    }
+
+    /// The image box-averaged by the comparison factor.
+    fn box_averaged(&self) -> Vec<f64> {
         let (f, w, h) = self.compare_size();
         let mut out = vec![0.0; w * h];
         for (r, row) in out.chunks_mut(w).enumerate() {
@@ -271,7 +281,7 @@ impl Highlight {
                 *v = acc / (f * f) as f64;
             }
         }
-        (out, w, h)
+        out
     }
 
     /// The highlight a slope distribution casts in this image's configuration, at the comparison size:
@@ -308,7 +318,7 @@ impl Highlight {
     pub fn correlation(&self, grid: &SlopeGrid, tilt: (f64, f64)) -> f64 {
         let (a, _, _) = self.compare_image();
         let (b, _, _) = self.render(grid, tilt);
-        pearson(&a, &b)
+        pearson(a, &b)
     }
 
     /// The report's figure: the image and a rendered highlight side by side on one linear colour scale
@@ -346,7 +356,7 @@ impl Highlight {
             }
             .render()
         };
-        crate::plot::Canvas::hstack(&[panel(&img, "highlight asked for"), panel(rendered, title)])
+        crate::plot::Canvas::hstack(&[panel(img, "highlight asked for"), panel(rendered, title)])
     }
 }
 

@@ -46,7 +46,7 @@ pub fn compare(
     let design_corr = h.correlation(design, t);
     let (rendered, w, hh) = h.render(milled, t);
     let (image, _, _) = h.compare_image();
-    let milled_corr = crate::brdf::highlight::pearson(&image, &rendered);
+    let milled_corr = crate::brdf::highlight::pearson(image, &rendered);
     for (m, c) in [(design_m, design_corr), (milled_m, milled_corr)] {
         // A drawn highlight has no single peak: its densest slope is wherever the image is brightest and
         // the Jacobian largest (its rim), so the peak check is replaced by the image's correlation.
