@@ -52,7 +52,7 @@ pub enum Source {
 
 /// The slope density `P22` of a BRDF's half-angle distribution on `domain`, normalised to unit mass.
 pub fn half_angle_density(brdf: &Brdf, domain: SlopeDomain, cfg: &HalfAngleConfig) -> (SlopeGrid, Source) {
-    if let crate::brdf::Model::Highlight(h) = &brdf.model {
+    if let Some(h) = brdf.highlight() {
         return (h.slope_grid(domain), Source::MeasuredNdf);
     }
     if brdf.has_measured_ndf() {

@@ -198,7 +198,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
             .map(|r| r.scale)
             .unwrap_or([1.0, 1.0]),
         // a drawn highlight has no single peak to compare the scallops' lobe with (its check is the image's)
-        target_peak_halfwidth: if input.target.highlight().is_some() {
+        target_peak_halfwidth: if highlight.is_some() {
             0.0
         } else {
             let across = (input.raster_angle_deg + 90.0).to_radians();
