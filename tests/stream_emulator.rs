@@ -499,30 +499,40 @@ fn interrupted_system_calls_are_not_a_lost_link() {
     assert!(matches!(outcome, Outcome::Completed(_)), "{outcome:?}");
 }
 
-/// Issue 14, row 3: a soft limit on a homed machine. The controller answers nothing until reset, the
-/// streamer stops without waiting out the hold timeout, resets, and the resume approach stays inside
-/// machine travel (today's `G0 Z5` lies beyond machine Z 0 and raises a new `ALARM:2`).
-#[test]
-fn a_soft_limit_stops_at_once_and_the_resume_stays_inside_travel() {
-    let dir = tempfile::tempdir().unwrap();
-    // Work = machine coordinates (no offset), homed at the top corner: all motion at negative coordinates.
+/// Work = machine coordinates (no offset), homed at the top corner: 24 lines, all motion at negative
+/// coordinates.
+fn negative_program(dir: &Path) -> Program {
     let mut text = String::from("G21G90\nG0X-10Y-10Z-1\nG1Z-3F300\n");
     for i in 0..20 {
         text += &format!("G1X{}Y{}\n", -10 - (i % 2) * 8, -11 - i);
     }
     text += "G0Z-1\n";
-    let prog = program(dir.path(), "neg.nc", &text);
-    let emu = Emulator::start(EmulatorConfig {
+    program(dir, "neg.nc", &text)
+}
+
+/// A stock controller at 1 Mbaud and 8× time with `settings`, raising `ALARM:2` on line 15.
+fn alarm_at_line_15(settings: Vec<(u16, f64)>) -> Emulator {
+    Emulator::start(EmulatorConfig {
         baud: 1_000_000,
         time_scale: 8.0,
-        settings: vec![(22, 1.0), (20, 1.0)],
+        settings,
         faults: vec![Fault {
             at: FaultAt::LineNumber(15),
             kind: FaultKind::Alarm(2),
         }],
         ..EmulatorConfig::default()
     })
-    .unwrap();
+    .unwrap()
+}
+
+/// Issue 14, row 3: a soft limit on a homed machine. The controller answers nothing until reset, the
+/// streamer stops without waiting out the hold timeout, resets, and the resume approach stays inside
+/// machine travel (today's `G0 Z5` lies beyond machine Z 0 and raises a new `ALARM:2`).
+#[test]
+fn a_soft_limit_stops_at_once_and_the_resume_stays_inside_travel() {
+    let dir = tempfile::tempdir().unwrap();
+    let prog = negative_program(dir.path());
+    let emu = alarm_at_line_15(vec![(22, 1.0), (20, 1.0)]);
     // Home first: a machine with homing enabled powers up locked.
     let mut link = SerialLink::open(&emu.port_path().unwrap(), 1_000_000).unwrap();
     link.write_all(b"$H\n").unwrap();
@@ -577,22 +587,8 @@ impl Observer for LeaveInAlarm {
 #[test]
 fn a_user_can_leave_the_controller_in_alarm_and_resume_later() {
     let dir = tempfile::tempdir().unwrap();
-    let mut text = String::from("G21G90\nG0X-10Y-10Z-1\nG1Z-3F300\n");
-    for i in 0..20 {
-        text += &format!("G1X{}Y{}\n", -10 - (i % 2) * 8, -11 - i);
-    }
-    text += "G0Z-1\n";
-    let prog = program(dir.path(), "neg.nc", &text);
-    let emu = Emulator::start(EmulatorConfig {
-        baud: 1_000_000,
-        time_scale: 8.0,
-        faults: vec![Fault {
-            at: FaultAt::LineNumber(15),
-            kind: FaultKind::Alarm(2),
-        }],
-        ..EmulatorConfig::default()
-    })
-    .unwrap();
+    let prog = negative_program(dir.path());
+    let emu = alarm_at_line_15(vec![]);
     let journal = dir.path().join("j");
     let port = emu.port_path().expect("port up");
     let mut link = SerialLink::open(&port, 1_000_000).unwrap();
