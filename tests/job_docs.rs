@@ -15,6 +15,12 @@ fn keys(prefix: &str, v: &toml::Value, out: &mut BTreeSet<String>) {
             };
             match v {
                 toml::Value::Table(_) => keys(&path, v, out),
+                // an array of tables (`[[svbrdf.region]]`): its keys under the array's name
+                toml::Value::Array(a) if a.iter().all(|e| e.is_table()) && !a.is_empty() => {
+                    for e in a {
+                        keys(&path, e, out);
+                    }
+                }
                 _ => {
                     out.insert(path);
                 }
@@ -26,14 +32,24 @@ fn keys(prefix: &str, v: &toml::Value, out: &mut BTreeSet<String>) {
 #[test]
 fn every_job_key_is_documented_and_every_documented_key_exists() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let ready = Job::load(&root.join("examples/default.toml")).unwrap();
-    let v = toml::Value::try_from(&ready.job).unwrap();
     let mut have = BTreeSet::new();
-    keys("", &v, &mut have);
+    // the default job, and the svBRDF example for `[svbrdf]` and its regions
+    for job in ["examples/default.toml", "examples/svbrdf-logo.toml"] {
+        let ready = Job::load(&root.join(job)).unwrap();
+        let v = toml::Value::try_from(&ready.job).unwrap();
+        keys("", &v, &mut have);
+    }
     // the optional keys a job without them does not serialise
     have.insert("target.polish".to_string());
     have.insert("target.merl_from".to_string());
-    for k in ["target.highlight", "target.highlight_extent_deg", "target.material"] {
+    for k in [
+        "target.highlight",
+        "target.highlight_extent_deg",
+        "target.material",
+        "svbrdf.region.highlight",
+        "svbrdf.region.highlight_extent_deg",
+        "svbrdf.region.material",
+    ] {
         have.insert(k.to_string());
     }
     let doc = std::fs::read_to_string(root.join("docs/JOB.md")).unwrap();

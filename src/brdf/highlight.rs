@@ -31,7 +31,7 @@ use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// The largest image side accepted, pixels (16 M pixels at most, 128 MB of luminance).
-pub const MAX_SIDE_PX: u32 = 4096;
+pub const MAX_SIDE_PX: u32 = crate::image::MAX_SIDE_PX;
 
 /// The largest PNG file read, bytes.
 pub const MAX_FILE_BYTES: u64 = 256 << 20;
@@ -388,52 +388,27 @@ fn srgb_decode(c: f64) -> f64 {
     }
 }
 
-/// Decode a PNG to linear luminance × alpha: `(width, height, pixels)`, top row first.
+/// Decode a PNG to linear luminance × alpha: `(width, height, pixels)`, top row first
+/// ([`crate::image::decode_png`] does the checks).
 fn decode_png(bytes: &[u8]) -> Result<(usize, usize, Vec<f64>), String> {
-    if !bytes.starts_with(&[0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a]) {
-        return Err("not a PNG image (it does not start with the PNG signature)".into());
-    }
-    let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
-    decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
-    let mut reader = decoder.read_info().map_err(|e| format!("not a readable PNG: {e}"))?;
-    let (w, h) = (reader.info().width, reader.info().height);
-    if w > MAX_SIDE_PX || h > MAX_SIDE_PX {
-        return Err(format!(
-            "the image is {w} × {h} pixels; at most {MAX_SIDE_PX} per side is accepted"
-        ));
-    }
-    let mut buf = vec![0u8; reader.output_buffer_size()];
-    let frame = reader
-        .next_frame(&mut buf)
-        .map_err(|e| format!("the PNG's image data cannot be decoded: {e}"))?;
-    if (frame.width, frame.height) != (w, h) {
-        return Err(format!(
-            "an animated PNG (its first frame is {} × {} of {w} × {h}): give a single image",
-            frame.width, frame.height
-        ));
-    }
-    let channels = frame.color_type.samples();
-    let data = &buf[..frame.buffer_size()];
-    let line = frame.line_size;
-    let (w, h) = (w as usize, h as usize);
-    let mut pixels = Vec::with_capacity(w * h);
-    for r in 0..h {
-        let row = &data[r * line..r * line + w * channels];
-        for px in row.chunks_exact(channels) {
-            let lin = |v: u8| srgb_decode(v as f64 / 255.0);
-            let (lum, alpha) = match channels {
+    let img = crate::image::decode_png(bytes)?;
+    let lin = |v: u8| srgb_decode(v as f64 / 255.0);
+    let pixels = img
+        .data
+        .chunks_exact(img.channels)
+        .map(|px| {
+            let (lum, alpha) = match img.channels {
                 1 => (lin(px[0]), 1.0),
                 2 => (lin(px[0]), px[1] as f64 / 255.0),
-                3 | 4 => (
+                c => (
                     super::luminance(&[lin(px[0]), lin(px[1]), lin(px[2])]),
-                    if channels == 4 { px[3] as f64 / 255.0 } else { 1.0 },
+                    if c == 4 { px[3] as f64 / 255.0 } else { 1.0 },
                 ),
-                n => return Err(format!("unexpected {n} samples per pixel")),
             };
-            pixels.push(lum * alpha);
-        }
-    }
-    Ok((w, h, pixels))
+            lum * alpha
+        })
+        .collect();
+    Ok((img.width, img.height, pixels))
 }
 
 #[cfg(test)]

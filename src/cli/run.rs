@@ -88,6 +88,13 @@ pub fn run(a: &Args) -> Result<i32> {
             b.enable_steady_tick(Duration::from_millis(120));
             bar = Some(b);
         }
+        Progress::Region(name) => {
+            let line = format!("   region `{name}`");
+            match &bar {
+                Some(b) => b.suspend(|| println!("{line}")),
+                None => println!("{line}"),
+            }
+        }
         Progress::Finished(_) => {
             if let Some(b) = bar.take() {
                 b.finish_with_message("done in");
@@ -125,7 +132,7 @@ fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outc
         );
     }
     if let Some(r) = outcome.relief_mm {
-        println!("relief    {r:.3} mm (design tile)");
+        println!("relief    {r:.3} mm (the design, highest to lowest point)");
     }
     if let Some(p) = &outcome.program {
         println!(
@@ -137,9 +144,10 @@ fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outc
             t.tools_in_order()
         );
     }
-    let code = match &outcome.metrics {
-        Some(m) => verdict(m, a.allow_shortfall),
-        None => {
+    let code = match (&outcome.metrics, &outcome.regions) {
+        (Some(m), _) => verdict(m, a.allow_shortfall),
+        (None, Some(m)) => region_verdict(m, a.allow_shortfall),
+        (None, None) => {
             println!("verdict   none: stopped after `{}` (--until)", a.until);
             0
         }
@@ -157,6 +165,40 @@ fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outc
     code
 }
 
+/// Print each region's figures and the verdict of a job with `[svbrdf]`; the exit code.
+fn region_verdict(m: &brdfmill::verify::RegionsMetrics, allow_shortfall: bool) -> i32 {
+    for r in &m.regions {
+        println!(
+            "region    `{}`: milled NDF corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}], border {:.2} mm, {}",
+            r.name,
+            r.milled.ndf_corr,
+            r.milled.ndf_l1,
+            r.milled.cov_ratio[0],
+            r.milled.cov_ratio[1],
+            r.border_mm,
+            if r.pass { "passes" } else { "falls short" }
+        );
+    }
+    verdict_line(m.pass, "every region meets every tolerance", &m.notes, allow_shortfall)
+}
+
+/// The verdict line and its reasons; the exit code.
+fn verdict_line(pass: bool, what_passes: &str, notes: &[String], allow_shortfall: bool) -> i32 {
+    if pass {
+        println!("verdict   PASS: {what_passes}");
+    } else {
+        println!("verdict   FALLS SHORT (see the report's \"Why\")");
+    }
+    for n in notes {
+        println!("          - {n}");
+    }
+    if pass || allow_shortfall {
+        0
+    } else {
+        EXIT_SHORTFALL
+    }
+}
+
 /// Print the figures and the verdict; the exit code.
 fn verdict(m: &brdfmill::verify::Metrics, allow_shortfall: bool) -> i32 {
     println!(
@@ -167,20 +209,10 @@ fn verdict(m: &brdfmill::verify::Metrics, allow_shortfall: bool) -> i32 {
         "milled    NDF corr {:.4}, L1 {:.4}, JS {:.4}, variance ratio [{:.3}, {:.3}]",
         m.milled.ndf_corr, m.milled.ndf_l1, m.milled.ndf_js, m.milled.cov_ratio[0], m.milled.cov_ratio[1]
     );
-    println!(
-        "verdict   {}",
-        if m.pass {
-            "PASS: the milled surface meets every tolerance"
-        } else {
-            "FALLS SHORT (see the report's \"Why\")"
-        }
-    );
-    for n in &m.notes {
-        println!("          - {n}");
-    }
-    if m.pass || allow_shortfall {
-        0
-    } else {
-        EXIT_SHORTFALL
-    }
+    verdict_line(
+        m.pass,
+        "the milled surface meets every tolerance",
+        &m.notes,
+        allow_shortfall,
+    )
 }

@@ -29,6 +29,7 @@ use crate::brdf::Brdf;
 use crate::design::DesignConfig;
 use crate::facets::FacetsConfig;
 use crate::ndf::NdfConfig;
+use crate::svbrdf::{Labels, SvbrdfSection};
 use crate::tool::Shape;
 use crate::toolpath::{machine::Machine, ToolpathConfig};
 use crate::verify::VerifyConfig;
@@ -71,6 +72,21 @@ fn default_base() -> String {
     "scallop".into()
 }
 
+impl Default for TargetSection {
+    /// No target (a job with `[svbrdf]` regions gives theirs), the scallop lobe as the base.
+    fn default() -> Self {
+        Self {
+            brdf: String::new(),
+            highlight: None,
+            highlight_extent_deg: None,
+            material: None,
+            base: default_base(),
+            polish: None,
+            merl_from: None,
+        }
+    }
+}
+
 /// `[machine]`.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -106,7 +122,8 @@ pub struct Job {
     pub version: u32,
     /// A name for the report.
     pub name: String,
-    /// The target.
+    /// The target (with `[svbrdf]`, only its `base` and `polish`: the regions give the targets).
+    #[serde(default)]
     pub target: TargetSection,
     /// The machine.
     pub machine: MachineSection,
@@ -128,6 +145,9 @@ pub struct Job {
     /// Verification.
     #[serde(default)]
     pub verify: VerifyConfig,
+    /// A spatially varying target: a label image and a target per label colour.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub svbrdf: Option<SvbrdfSection>,
 }
 
 /// A job that cannot run, or a stage that failed.
@@ -154,14 +174,31 @@ pub enum JobError {
     Write(#[from] crate::io::WriteError),
 }
 
+/// One region of a spatially varying target, ready to run.
+#[derive(Clone, Debug)]
+pub struct RegionTarget {
+    /// Its name (files `ndf-NAME.json`, `tile-NAME.*`).
+    pub name: String,
+    /// Its label colour.
+    pub color: [u8; 3],
+    /// The target spec as resolved.
+    pub spec: String,
+    /// The target.
+    pub target: Brdf,
+}
+
 /// A job checked and ready to run: the parsed inputs it needs.
 pub struct Ready {
     /// The job.
     pub job: Job,
     /// The job file's folder.
     pub dir: PathBuf,
-    /// The target BRDF.
+    /// The target BRDF (with `[svbrdf]`, the first region's).
     pub target: Brdf,
+    /// With `[svbrdf]`: each region's target, in the order of `[[svbrdf.region]]`.
+    pub regions: Vec<RegionTarget>,
+    /// With `[svbrdf]`: the label image, read and checked against the regions.
+    pub labels: Option<Labels>,
     /// The machine.
     pub machine: Machine,
     /// Path of the machine profile.
@@ -216,8 +253,23 @@ impl Job {
             .map_err(|e| invalid(format!("`target.merl_from`: {e}")))?
             .into_iter()
             .collect();
-        let (key, spec) = target_spec(&job.target, &dir).map_err(&invalid)?;
-        let target = Brdf::parse(&spec).map_err(|e| invalid(format!("`{key}`: {e}")))?;
+        let regions = match &job.svbrdf {
+            Some(sv) => region_targets(&job.target, sv, &dir).map_err(&invalid)?,
+            None => vec![],
+        };
+        let target = match regions.first() {
+            Some(r) => r.target.clone(),
+            None => {
+                let t = &job.target;
+                let (key, spec) = target_spec(
+                    "target",
+                    (&t.brdf, &t.highlight, t.highlight_extent_deg, &t.material),
+                    &dir,
+                )
+                .map_err(&invalid)?;
+                Brdf::parse(&spec).map_err(|e| invalid(format!("`{key}`: {e}")))?
+            }
+        };
         if !matches!(job.target.base.as_str(), "scallop" | "none") {
             Brdf::parse(&resolve_spec(&job.target.base, &dir)).map_err(|e| invalid(format!("`target.base`: {e}")))?;
         }
@@ -276,10 +328,16 @@ impl Job {
         }
         check_work(&job, tool.radius_mm()).map_err(invalid)?;
         job.verify.validate().map_err(|e| invalid(e.to_string()))?;
+        let labels = match &job.svbrdf {
+            Some(sv) => Some(read_labels(&job, sv, &regions, &dir).map_err(|e| invalid(e.to_string()))?),
+            None => None,
+        };
         Ok(Ready {
             job,
             dir,
             target,
+            regions,
+            labels,
             machine,
             machine_path,
             slope_cap_from,
@@ -288,31 +346,106 @@ impl Job {
     }
 }
 
-/// The target's BRDF spec, from `target.brdf` or from `target.highlight` (with its extent and material), and
+/// The fields that name a target: a BRDF spec, or a highlight with its extent and material.
+type TargetFields<'a> = (&'a String, &'a Option<String>, Option<f64>, &'a Option<String>);
+
+/// A target's BRDF spec, from `SECTION.brdf` or from `SECTION.highlight` (with its extent and material), and
 /// the key it came from. Exactly one of the two must be given; the highlight's keys only go with it.
-fn target_spec(t: &TargetSection, dir: &Path) -> Result<(&'static str, String), String> {
-    match (&t.highlight, t.brdf.trim().is_empty()) {
-        (Some(_), false) => Err("give `target.brdf` or `target.highlight`, not both".into()),
-        (None, true) => Err("missing `target.brdf` (a BRDF spec) or `target.highlight` (a PNG)".into()),
+fn target_spec(
+    section: &str,
+    (brdf, highlight, extent, material): TargetFields,
+    dir: &Path,
+) -> Result<(String, String), String> {
+    match (highlight, brdf.trim().is_empty()) {
+        (Some(_), false) => Err(format!("give `{section}.brdf` or `{section}.highlight`, not both")),
+        (None, true) => Err(format!(
+            "missing `{section}.brdf` (a BRDF spec) or `{section}.highlight` (a PNG)"
+        )),
         (None, false) => {
             for (key, given) in [
-                ("highlight_extent_deg", t.highlight_extent_deg.is_some()),
-                ("material", t.material.is_some()),
+                ("highlight_extent_deg", extent.is_some()),
+                ("material", material.is_some()),
             ] {
                 if given {
                     return Err(format!(
-                        "`target.{key}` goes with `target.highlight`; with `target.brdf` give the material in the spec (`…,material=NAME`)"
+                        "`{section}.{key}` goes with `{section}.highlight`; with `{section}.brdf` give the material in the spec (`…,material=NAME`)"
                     ));
                 }
             }
-            Ok(("target.brdf", resolve_spec(&t.brdf, dir)))
+            Ok((format!("{section}.brdf"), resolve_spec(brdf, dir)))
         }
         (Some(path), true) => {
-            let spec = crate::brdf::highlight::spec(path, t.highlight_extent_deg, t.material.as_deref())
-                .map_err(|e| format!("`target.highlight`: {e}"))?;
-            Ok(("target.highlight", resolve_spec(&spec, dir)))
+            let spec = crate::brdf::highlight::spec(path, extent, material.as_deref())
+                .map_err(|e| format!("`{section}.highlight`: {e}"))?;
+            Ok((format!("{section}.highlight"), resolve_spec(&spec, dir)))
         }
     }
+}
+
+/// `[[svbrdf.region]]` → each region's target, with names and colours checked (valid, distinct). With
+/// regions, `[target]` gives no target of its own (only `base` and `polish`).
+fn region_targets(t: &TargetSection, sv: &SvbrdfSection, dir: &Path) -> Result<Vec<RegionTarget>, String> {
+    if !t.brdf.trim().is_empty() || t.highlight.is_some() || t.material.is_some() || t.highlight_extent_deg.is_some() {
+        return Err(
+            "with `[svbrdf]` each `[[svbrdf.region]]` names its own target: leave `target.brdf`, `target.highlight` and their keys out (`[target]` keeps `base` and `polish`)".into(),
+        );
+    }
+    if t.merl_from.is_some() {
+        return Err("`target.merl_from` does not go with `[svbrdf]`".into());
+    }
+    if sv.region.len() < 2 {
+        return Err(format!(
+            "`[svbrdf]` needs at least two `[[svbrdf.region]]` (got {}); a single target goes in `[target]`",
+            sv.region.len()
+        ));
+    }
+    if sv.region.len() > 16 {
+        return Err(format!("`[svbrdf]` has {} regions; at most 16", sv.region.len()));
+    }
+    let mut out: Vec<RegionTarget> = vec![];
+    for (k, r) in sv.region.iter().enumerate() {
+        let section = format!("svbrdf.region[{}]", k + 1);
+        crate::svbrdf::check_name(&r.name).map_err(|e| format!("`{section}.name`: {e}"))?;
+        let color = crate::svbrdf::parse_color(&r.color).map_err(|e| format!("`{section}.color`: {e}"))?;
+        if let Some(o) = out.iter().find(|o| o.name == r.name) {
+            return Err(format!("`{section}.name`: `{}` is already a region's name", o.name));
+        }
+        if let Some(o) = out.iter().find(|o| o.color == color) {
+            return Err(format!(
+                "`{section}.color`: {} is already region `{}`'s colour",
+                crate::svbrdf::hex(color),
+                o.name
+            ));
+        }
+        let (key, spec) = target_spec(
+            &section,
+            (&r.brdf, &r.highlight, r.highlight_extent_deg, &r.material),
+            dir,
+        )?;
+        let target = Brdf::parse(&spec).map_err(|e| format!("`{key}`: {e}"))?;
+        out.push(RegionTarget {
+            name: r.name.clone(),
+            color,
+            spec,
+            target,
+        });
+    }
+    Ok(out)
+}
+
+/// Read the label image of `[svbrdf]` against its regions and the work area, and refuse a region too small
+/// to hold one tile period.
+fn read_labels(job: &Job, sv: &SvbrdfSection, regions: &[RegionTarget], dir: &Path) -> Result<Labels, String> {
+    let path = dir.join(&sv.labels);
+    let names: Vec<String> = regions.iter().map(|r| r.name.clone()).collect();
+    let colors: Vec<[u8; 3]> = regions.iter().map(|r| r.color).collect();
+    let labels =
+        Labels::read(&path, &names, &colors, job.toolpath.area_mm).map_err(|e| format!("`svbrdf.labels`: {e}"))?;
+    let f = &job.facets;
+    labels
+        .check_period([f.facets_x as f64 * f.facet_mm, f.facets_y as f64 * f.facet_mm])
+        .map_err(|e| format!("`svbrdf.region`: {e}"))?;
+    Ok(labels)
 }
 
 /// `target.merl_from`: write the `merl:` file `target.brdf` names from that spec when the file is missing.
@@ -500,6 +633,7 @@ pub(crate) fn resolve_spec(spec: &str, dir: &Path) -> String {
     spec.to_string()
 }
 
+mod regions;
 mod run;
 mod summary;
 

@@ -68,12 +68,16 @@ pub enum Progress<'a> {
     Arrangement(&'a Round),
     /// The design loop finished a round.
     Round(&'a Round),
+    /// A job with `[svbrdf]`: the design rounds that follow are this region's.
+    Region(&'a str),
 }
 
 /// What the run produced.
 pub struct Outcome {
-    /// The metrics (`None` when the run stopped before verification).
+    /// The metrics (`None` when the run stopped before verification, or for a job with `[svbrdf]`).
     pub metrics: Option<Metrics>,
+    /// A job with `[svbrdf]`: the regions' metrics (`None` before verification).
+    pub regions: Option<verify::RegionsMetrics>,
     /// The program's numbers (`None` when the run stopped before the toolpath).
     pub program: Option<toolpath::Summary>,
     /// The tile's relief (highest minus lowest point), mm (`None` before the facets).
@@ -111,14 +115,14 @@ fn write_state(o: &mut Out, job: &str, done: &[(Stage, f64)], state: &str) -> Re
     Ok(())
 }
 
-fn stage_error(stage: &'static str, e: impl std::fmt::Display) -> JobError {
+pub(super) fn stage_error(stage: &'static str, e: impl std::fmt::Display) -> JobError {
     JobError::Stage {
         stage,
         message: e.to_string(),
     }
 }
 
-fn stage_err<E: std::fmt::Display>(stage: &'static str) -> impl Fn(E) -> JobError {
+pub(super) fn stage_err<E: std::fmt::Display>(stage: &'static str) -> impl Fn(E) -> JobError {
     move |e| JobError::Stage {
         stage,
         message: e.to_string(),
@@ -126,77 +130,105 @@ fn stage_err<E: std::fmt::Display>(stage: &'static str) -> impl Fn(E) -> JobErro
 }
 
 /// The NDF stage's products.
-struct NdfStage {
-    ndf: Ndf,
-    kernel: Option<Kernel>,
-    polish: Option<Brdf>,
+pub(super) struct NdfStage {
+    pub(super) ndf: Ndf,
+    pub(super) kernel: Option<Kernel>,
+    pub(super) polish: Option<Brdf>,
 }
 
-/// Artifacts written so far, in order.
-struct Out<'a> {
+/// Artifacts written so far, in order, and the stages' times.
+pub(super) struct Out<'a> {
     dir: &'a Path,
     written: Vec<PathBuf>,
+    job: String,
+    timings: Vec<(Stage, f64)>,
+    clock: std::time::Instant,
 }
 
-impl Out<'_> {
-    fn write(&mut self, name: &str, bytes: &[u8]) -> Result<(), JobError> {
+impl<'a> Out<'a> {
+    /// Start a run into `dir`: `run.json` says it is running.
+    pub(super) fn new(dir: &'a Path, job: &str) -> Result<Self, JobError> {
+        let mut o = Out {
+            dir,
+            written: vec![],
+            job: job.to_string(),
+            timings: vec![],
+            clock: std::time::Instant::now(),
+        };
+        o.state("running")?;
+        Ok(o)
+    }
+
+    pub(super) fn write(&mut self, name: &str, bytes: &[u8]) -> Result<(), JobError> {
         let p = self.dir.join(name);
         crate::io::write_atomic(&p, bytes)?;
         self.written.push(p);
         Ok(())
     }
-}
 
-/// Run the stages in order up to and including `until`, writing each artifact to `out` as it is made;
-/// `progress` hears of every stage's start and end and of every design round.
-pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Progress)) -> Result<Outcome, JobError> {
-    let job = &ready.job;
-    let mut o = Out {
-        dir: out,
-        written: vec![],
-    };
-    let mut timings = vec![];
-    let mut clock = std::time::Instant::now();
-    let mut step =
-        |progress: &mut dyn FnMut(Progress), stage: Stage, timings: &mut Vec<(Stage, f64)>, started: bool| {
-            progress(if started {
-                Progress::Started(stage)
-            } else {
-                Progress::Finished(stage)
-            });
-            if !started {
-                timings.push((stage, clock.elapsed().as_secs_f64()));
-            }
-            clock = std::time::Instant::now();
-        };
-    let tool = ready
-        .machine
-        .tool(&job.toolpath.tool)
-        .map_err(stage_err("toolpath"))?
-        .clone();
-    let r = tool.radius_mm();
-    let stepover = if job.toolpath.stepover_mm > 0.0 {
-        job.toolpath.stepover_mm
-    } else {
-        raster::stepover_for_scallop(r, job.toolpath.scallop_um * 1e-3)
-    };
+    /// Write a heightfield as `.npy`.
+    pub(super) fn npy(&mut self, name: &str, hf: &crate::heightfield::Heightfield) -> Result<(), JobError> {
+        let p = self.dir.join(name);
+        hf.write_npy(&p)?;
+        self.written.push(p);
+        Ok(())
+    }
 
-    let name = job.name.clone();
-    let finish = |o: Out, timings: Vec<(Stage, f64)>, mut outcome: Outcome| -> Result<Outcome, JobError> {
-        let mut o = o;
-        write_state(&mut o, &name, &timings, "complete")?;
-        outcome.bytes_written = o
+    fn state(&mut self, state: &str) -> Result<(), JobError> {
+        let (job, done) = (self.job.clone(), std::mem::take(&mut self.timings));
+        let r = write_state(self, &job, &done, state);
+        self.timings = done;
+        r
+    }
+
+    /// The files written so far.
+    pub(super) fn written_files(&self) -> Vec<PathBuf> {
+        self.written.clone()
+    }
+
+    /// A stage starts.
+    pub(super) fn start(&mut self, progress: &mut dyn FnMut(Progress), stage: Stage) {
+        progress(Progress::Started(stage));
+        self.clock = std::time::Instant::now();
+    }
+
+    /// A stage has written its artifacts: its time is kept and `run.json` lists it.
+    pub(super) fn done(&mut self, progress: &mut dyn FnMut(Progress), stage: Stage) -> Result<(), JobError> {
+        progress(Progress::Finished(stage));
+        self.timings.push((stage, self.clock.elapsed().as_secs_f64()));
+        self.state("running")
+    }
+
+    /// The run is complete: `run.json` says so, and the outcome gets the files, their bytes and the times.
+    pub(super) fn finish(mut self, mut outcome: Outcome) -> Result<Outcome, JobError> {
+        self.state("complete")?;
+        outcome.bytes_written = self
             .written
             .iter()
             .filter_map(|p| std::fs::metadata(p).ok())
             .map(|m| m.len())
             .sum();
-        outcome.artifacts = o.written;
-        outcome.timings = timings;
+        outcome.artifacts = self.written;
+        outcome.timings = self.timings;
         Ok(outcome)
-    };
-    let mut outcome = Outcome {
+    }
+}
+
+/// The finishing tool's stepover, mm: given, or from the scallop height.
+pub(super) fn stepover_mm(ready: &Ready, r: f64) -> f64 {
+    let t = &ready.job.toolpath;
+    if t.stepover_mm > 0.0 {
+        t.stepover_mm
+    } else {
+        raster::stepover_for_scallop(r, t.scallop_um * 1e-3)
+    }
+}
+
+/// An outcome with nothing in it yet.
+pub(super) fn empty_outcome(ready: &Ready) -> Outcome {
+    Outcome {
         metrics: None,
+        regions: None,
         program: None,
         relief_mm: None,
         artifacts: vec![],
@@ -205,86 +237,70 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
         report: None,
         rounds: (vec![], 0),
         arrangements: vec![],
-        slope_cap: (job.facets.max_slope_deg, ready.slope_cap_from.clone()),
+        slope_cap: (ready.job.facets.max_slope_deg, ready.slope_cap_from.clone()),
         warnings: vec![],
-    };
-    write_state(&mut o, &job.name, &timings, "running")?;
-    step(&mut *progress, Stage::Ndf, &mut timings, true);
-    let nd = ndf_stage(ready, r, stepover, &mut o)?;
+    }
+}
+
+/// Run the stages in order up to and including `until`, writing each artifact to `out` as it is made;
+/// `progress` hears of every stage's start and end and of every design round. A job with `[svbrdf]`
+/// runs the regions' runner (`job::regions`).
+pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Progress)) -> Result<Outcome, JobError> {
+    if ready.labels.is_some() {
+        return super::regions::run(ready, out, until, progress);
+    }
+    let job = &ready.job;
+    let mut o = Out::new(out, &job.name)?;
+    let tool = ready
+        .machine
+        .tool(&job.toolpath.tool)
+        .map_err(stage_err("toolpath"))?
+        .clone();
+    let r = tool.radius_mm();
+    let stepover = stepover_mm(ready, r);
+    let mut outcome = empty_outcome(ready);
+    o.start(progress, Stage::Ndf);
+    let nd = ndf_stage(ready, &ready.target, "", r, stepover, &mut o)?;
     outcome.warnings.extend(crate::ndf::grid_warning(&nd.ndf));
-    step(&mut *progress, Stage::Ndf, &mut timings, false);
-    write_state(&mut o, &job.name, &timings, "running")?;
+    o.done(progress, Stage::Ndf)?;
     if until == Stage::Ndf {
-        return finish(o, timings, outcome);
+        return o.finish(outcome);
     }
 
-    step(&mut *progress, Stage::Facets, &mut timings, true);
+    o.start(progress, Stage::Facets);
     let scallop = scallop_lobe(ready, &nd, r, stepover)?;
-    let tool_shape = Shape::Ball {
-        diameter_mm: tool.diameter_mm(),
-    };
-    let tol = &job.verify.tolerances;
-    let d = design::run(
-        &job.design,
-        &job.facets,
-        &DesignInput {
-            ndf: &nd.ndf,
-            base: nd.kernel.as_ref(),
-            scallop: &scallop,
-            tool: tool_shape,
-            stepover_mm: stepover,
-            raster_angle_deg: job.toolpath.angle_deg,
-            cov_band: tol.cov_ratio,
-            corr_min: tol.ndf_corr_min,
-            l1_max: tol.ndf_l1_max,
-            highlight: ready.target.highlight(),
-            highlight_corr_min: tol.highlight_corr_min,
-        },
-        &mut |p| match p {
-            crate::design::Progress::Arrangement(r) => progress(Progress::Arrangement(r)),
-            crate::design::Progress::Round(r) => progress(Progress::Round(r)),
-        },
-    )
-    .map_err(stage_err("facets"))?;
-    let (tile, tile_figure) = facets_stage(&nd.ndf, d.tile, &mut o)?;
+    let d = design_stage(ready, &nd, &ready.target, &scallop, &tool, stepover, progress)?;
+    let (tile, tile_figure) = facets_stage(&nd.ndf, d.tile, "", &mut o)?;
     outcome.rounds = (d.rounds, d.chosen);
     outcome.arrangements = d.arrangements;
-    step(&mut *progress, Stage::Facets, &mut timings, false);
-    write_state(&mut o, &job.name, &timings, "running")?;
+    o.done(progress, Stage::Facets)?;
     let (lo, hi) = tile.heightfield.range();
     outcome.relief_mm = Some(hi - lo);
     if until == Stage::Facets {
-        return finish(o, timings, outcome);
+        return o.finish(outcome);
     }
 
-    step(&mut *progress, Stage::Toolpath, &mut timings, true);
-    let mut tcfg = job.toolpath.clone();
-    if tcfg.job == ToolpathConfig::default().job {
-        tcfg.job = job.name.clone();
-    }
-    let program = toolpath::run(&tcfg, &tile.heightfield, &ready.machine).map_err(stage_err("toolpath"))?;
-    o.write("program.nc", program.gcode.as_bytes())?;
-    let summary = serde_json::to_string_pretty(&program.summary).map_err(stage_err("toolpath"))?;
-    o.write("program.json", summary.as_bytes())?;
-    step(&mut *progress, Stage::Toolpath, &mut timings, false);
-    write_state(&mut o, &job.name, &timings, "running")?;
-    outcome.program = Some(program.summary.clone());
-    if until == Stage::Toolpath {
-        return finish(o, timings, outcome);
-    }
-
-    step(&mut *progress, Stage::Simulate, &mut timings, true);
-    let shape = Shape::Ball {
-        diameter_mm: tool.diameter_mm(),
+    let Some(cut) = program_and_cut(
+        ready,
+        &tile.heightfield,
+        "tile.npy",
+        &tool,
+        until,
+        &mut o,
+        &mut outcome,
+        progress,
+    )?
+    else {
+        return o.finish(outcome);
     };
-    let (sim, dev, sim_figures) = simulate_stage(ready, shape, &program.gcode, &tile.heightfield, &mut o)?;
-    step(&mut *progress, Stage::Simulate, &mut timings, false);
-    write_state(&mut o, &job.name, &timings, "running")?;
-    if until == Stage::Simulate {
-        return finish(o, timings, outcome);
-    }
+    let Cut {
+        program,
+        sim,
+        dev,
+        figures: sim_figures,
+    } = cut;
 
-    step(&mut *progress, Stage::Verify, &mut timings, true);
+    o.start(progress, Stage::Verify);
     let v = verify::run(
         &job.verify,
         &VerifyInput {
@@ -314,7 +330,7 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
     figures.extend(sim_figures);
     let html = report::Report {
         title: job.name.clone(),
-        metrics: &v.metrics,
+        verdict: report::Verdict::Single(&v.metrics),
         figures,
         parameters: super::summary::parameters(ready, &nd.ndf, &tile, &sim),
         program: super::summary::program(ready, &program.summary, outcome.relief_mm.unwrap_or(0.0), &dev),
@@ -322,14 +338,123 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
     }
     .to_html();
     o.write("report.html", html.as_bytes())?;
-    step(&mut *progress, Stage::Verify, &mut timings, false);
+    o.done(progress, Stage::Verify)?;
     outcome.metrics = Some(v.metrics);
     outcome.report = Some(out.join("report.html"));
-    finish(o, timings, outcome)
+    o.finish(outcome)
 }
 
-/// BRDF → NDF: the base lobe (the finishing raster's scallop lobe by default), Lucy–Richardson, `ndf.json`.
-fn ndf_stage(ready: &Ready, r: f64, stepover: f64, o: &mut Out) -> Result<NdfStage, JobError> {
+/// The design loop around the facets for `target`'s NDF stage `nd`.
+pub(super) fn design_stage(
+    ready: &Ready,
+    nd: &NdfStage,
+    target: &Brdf,
+    scallop: &Kernel,
+    tool: &crate::toolpath::machine::Tool,
+    stepover: f64,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<crate::design::Design, JobError> {
+    let job = &ready.job;
+    let tol = &job.verify.tolerances;
+    design::run(
+        &job.design,
+        &job.facets,
+        &DesignInput {
+            ndf: &nd.ndf,
+            base: nd.kernel.as_ref(),
+            scallop,
+            tool: Shape::Ball {
+                diameter_mm: tool.diameter_mm(),
+            },
+            stepover_mm: stepover,
+            raster_angle_deg: job.toolpath.angle_deg,
+            cov_band: tol.cov_ratio,
+            corr_min: tol.ndf_corr_min,
+            l1_max: tol.ndf_l1_max,
+            highlight: target.highlight(),
+            highlight_corr_min: tol.highlight_corr_min,
+        },
+        &mut |p| match p {
+            crate::design::Progress::Arrangement(r) => progress(Progress::Arrangement(r)),
+            crate::design::Progress::Round(r) => progress(Progress::Round(r)),
+        },
+    )
+    .map_err(stage_err("facets"))
+}
+
+/// The program and its simulated cut.
+pub(super) struct Cut {
+    pub(super) program: toolpath::Toolpath,
+    pub(super) sim: Simulation,
+    pub(super) dev: Deviation,
+    pub(super) figures: [report::Figure; 2],
+}
+
+/// The toolpath and simulate stages for `design` (written as `design_file`): `None` when `until` stops
+/// before the cut is simulated (the outcome has the program's numbers once it is made).
+#[allow(clippy::too_many_arguments)]
+pub(super) fn program_and_cut(
+    ready: &Ready,
+    design: &crate::heightfield::Heightfield,
+    design_file: &str,
+    tool: &crate::toolpath::machine::Tool,
+    until: Stage,
+    o: &mut Out,
+    outcome: &mut Outcome,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<Option<Cut>, JobError> {
+    o.start(progress, Stage::Toolpath);
+    let program = toolpath_stage(ready, design, o)?;
+    o.done(progress, Stage::Toolpath)?;
+    outcome.program = Some(program.summary.clone());
+    if until == Stage::Toolpath {
+        return Ok(None);
+    }
+    o.start(progress, Stage::Simulate);
+    let shape = Shape::Ball {
+        diameter_mm: tool.diameter_mm(),
+    };
+    let (sim, dev, figures) = simulate_stage(ready, shape, &program.gcode, design, design_file, o)?;
+    o.done(progress, Stage::Simulate)?;
+    if until == Stage::Simulate {
+        return Ok(None);
+    }
+    Ok(Some(Cut {
+        program,
+        sim,
+        dev,
+        figures,
+    }))
+}
+
+/// The design heightfield → `program.nc`, `program.json`.
+fn toolpath_stage(
+    ready: &Ready,
+    design: &crate::heightfield::Heightfield,
+    o: &mut Out,
+) -> Result<toolpath::Toolpath, JobError> {
+    let job = &ready.job;
+    let mut tcfg = job.toolpath.clone();
+    if tcfg.job == ToolpathConfig::default().job {
+        tcfg.job = job.name.clone();
+    }
+    let program = toolpath::run(&tcfg, design, &ready.machine).map_err(stage_err("toolpath"))?;
+    o.write("program.nc", program.gcode.as_bytes())?;
+    let summary = serde_json::to_string_pretty(&program.summary).map_err(stage_err("toolpath"))?;
+    o.write("program.json", summary.as_bytes())?;
+    Ok(program)
+}
+
+/// `target` → NDF: the base lobe (the finishing raster's scallop lobe by default), Lucy–Richardson,
+/// `ndf{suffix}.json`, `ndf{suffix}.png`.
+pub(super) fn ndf_stage(
+    ready: &Ready,
+    target: &Brdf,
+    suffix: &str,
+    r: f64,
+    stepover: f64,
+    o: &mut Out,
+) -> Result<NdfStage, JobError> {
     let job = &ready.job;
     let domain = job.ndf.domain();
     let polish = match &job.target.polish {
@@ -347,15 +472,15 @@ fn ndf_stage(ready: &Ready, r: f64, stepover: f64, o: &mut Out) -> Result<NdfSta
             Some(Kernel::from_brdf(&b, &domain, &job.ndf).map_err(|e| stage_error("ndf", e))?)
         }
     };
-    let n = ndf::run_with_kernel(&job.ndf, &ready.target, kernel.as_ref()).map_err(|e| stage_error("ndf", e))?;
-    o.write("ndf.json", NdfFile::from(&n).to_json().as_bytes())?;
-    o.write("ndf.png", &ndf::render_pair_png(&n).to_png())?;
+    let n = ndf::run_with_kernel(&job.ndf, target, kernel.as_ref()).map_err(|e| stage_error("ndf", e))?;
+    o.write(&format!("ndf{suffix}.json"), NdfFile::from(&n).to_json().as_bytes())?;
+    o.write(&format!("ndf{suffix}.png"), &ndf::render_pair_png(&n).to_png())?;
     Ok(NdfStage { ndf: n, kernel, polish })
 }
 
 /// The finishing raster's scallop lobe with the material's polish: the base lobe when that is the scallop
 /// lobe, otherwise made here (the as-milled model and the milled measurement use it either way).
-fn scallop_lobe(ready: &Ready, nd: &NdfStage, r: f64, stepover: f64) -> Result<Kernel, JobError> {
+pub(super) fn scallop_lobe(ready: &Ready, nd: &NdfStage, r: f64, stepover: f64) -> Result<Kernel, JobError> {
     let job = &ready.job;
     match &nd.kernel {
         Some(k) if job.target.base == "scallop" => Ok(k.clone()),
@@ -371,17 +496,17 @@ fn scallop_lobe(ready: &Ready, nd: &NdfStage, r: f64, stepover: f64) -> Result<K
     }
 }
 
-/// The design loop's tile → `tile.json`, `tile.npy`, `tile.png`, `tile.stl`. Returns the tile and its relief
+/// The design loop's tile → `tile{suffix}.json`, `.npy`, `.png`, `.stl`. Returns the tile and its relief
 /// report figure.
-fn facets_stage(n: &Ndf, tile: Tile, o: &mut Out) -> Result<(Tile, report::Figure), JobError> {
+pub(super) fn facets_stage(n: &Ndf, tile: Tile, suffix: &str, o: &mut Out) -> Result<(Tile, report::Figure), JobError> {
     let tile_file = TileFile::new(
         &tile,
         facets::format::Source {
-            ndf: "ndf.json".into(),
+            ndf: format!("ndf{suffix}.json"),
             brdf: n.brdf_spec.clone(),
             base: n.base_spec.clone(),
         },
-        "tile.npy",
+        &format!("tile{suffix}.npy"),
     );
     let tile_canvas = tile.relief_png();
     let c = &tile.config;
@@ -393,11 +518,10 @@ fn facets_stage(n: &Ndf, tile: Tile, o: &mut Out) -> Result<(Tile, report::Figur
         ),
         &tile_canvas,
     );
-    o.write("tile.json", tile_file.to_json().as_bytes())?;
-    tile.heightfield.write_npy(&o.dir.join("tile.npy"))?;
-    o.written.push(o.dir.join("tile.npy"));
-    o.write("tile.png", &tile_figure.png)?;
-    o.write("tile.stl", &tile.stl())?;
+    o.write(&format!("tile{suffix}.json"), tile_file.to_json().as_bytes())?;
+    o.npy(&format!("tile{suffix}.npy"), &tile.heightfield)?;
+    o.write(&format!("tile{suffix}.png"), &tile_figure.png)?;
+    o.write(&format!("tile{suffix}.stl"), &tile.stl())?;
     Ok((tile, tile_figure))
 }
 
@@ -408,6 +532,7 @@ fn simulate_stage(
     shape: Shape,
     gcode: &str,
     design: &crate::heightfield::Heightfield,
+    design_file: &str,
     o: &mut Out,
 ) -> Result<(Simulation, Deviation, [report::Figure; 2]), JobError> {
     let job = &ready.job;
@@ -422,8 +547,7 @@ fn simulate_stage(
     };
     let sim = simulate::run(gcode, &scfg).map_err(stage_err("simulate"))?;
     let dev = simulate::deviation(&sim, design, &shape);
-    sim.heightfield.write_npy(&o.dir.join("sim.npy"))?;
-    o.written.push(o.dir.join("sim.npy"));
+    o.npy("sim.npy", &sim.heightfield)?;
     let sim_canvas = sim.heightfield.relief_png("simulated milled surface", 1024);
     let sim_figure = report::Figure::new(
         "Simulated milled surface",
@@ -453,7 +577,7 @@ fn simulate_stage(
     o.write("deviation.png", &dev_figure.png)?;
     o.write(
         "sim.json",
-        SimFile::new(&sim, &scfg, "program.nc", Some(&dev), Some("tile.npy".into()))
+        SimFile::new(&sim, &scfg, "program.nc", Some(&dev), Some(design_file.into()))
             .to_json()
             .as_bytes(),
     )?;
@@ -461,7 +585,7 @@ fn simulate_stage(
 }
 
 /// The artifact table of the report.
-fn listed(written: &[PathBuf]) -> Vec<(String, String)> {
+pub(super) fn listed(written: &[PathBuf]) -> Vec<(String, String)> {
     let mut listed: Vec<(String, String)> = written
         .iter()
         .map(|p| {
@@ -478,7 +602,21 @@ fn listed(written: &[PathBuf]) -> Vec<(String, String)> {
 }
 
 fn describe(p: &Path) -> String {
-    match p.file_name().and_then(|n| n.to_str()).unwrap_or("") {
+    let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
+    // a region's own files (`ndf-NAME.json`, `tile-NAME.npy`): what the single target's are, for that region
+    if let Some((stem, ext)) = name.split_once('.') {
+        if let Some((kind, region)) = stem.split_once('-') {
+            if matches!(kind, "ndf" | "tile") {
+                let what = describe(Path::new(&format!("{kind}.{ext}")));
+                return format!("region `{region}`: {what}");
+            }
+        }
+    }
+    match name {
+        "part.npy" => "the composed part's design heightfield, mm (NumPy)",
+        "part.png" => "the composed part, shaded relief",
+        "labels.png" => "the label map as read, in the regions' colours",
+        "light.png" => "the simulated part under a moving light",
         "ndf.json" => "target NDF and observed distribution (versioned JSON)",
         "ndf.png" => "observed and target NDF",
         "tile.json" => "facet tile: slopes, heights, stats",

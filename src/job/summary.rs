@@ -83,6 +83,60 @@ pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) 
     ]
 }
 
+/// The parameters table of a job with `[svbrdf]`: the shared settings, then each region's target and tile.
+pub(super) fn region_parameters(
+    ready: &Ready,
+    ndfs: &[&Ndf],
+    tiles: &[Tile],
+    part: &crate::svbrdf::Part,
+    sim: &Simulation,
+) -> Vec<(String, String)> {
+    const PER_TARGET: [&str; 5] = [
+        "target BRDF",
+        "deconvolution",
+        "relief",
+        "steps between facets",
+        "arrangement energy",
+    ];
+    let mut rows: Vec<(String, String)> = parameters(ready, ndfs[0], &tiles[0], sim)
+        .into_iter()
+        .filter(|(k, _)| !PER_TARGET.contains(&k.as_str()))
+        .collect();
+    if let Some(l) = &ready.labels {
+        rows.insert(
+            0,
+            (
+                "label image".into(),
+                format!("{} ({} × {} px over the area)", l.path.display(), l.width, l.height),
+            ),
+        );
+    }
+    for ((reg, n), (t, off)) in ready.regions.iter().zip(ndfs).zip(tiles.iter().zip(&part.offsets_mm)) {
+        rows.push((
+            format!("region `{}` ({})", reg.name, crate::svbrdf::hex(reg.color)),
+            format!(
+                "{}; {} deconvolution iterations; tile {}; offset {off:+.3} mm in the part; steps {:.1} µm rms",
+                n.brdf_spec,
+                n.deconvolution.iterations,
+                relief_line(&ready.job, t),
+                t.seams.rms_um
+            ),
+        ));
+    }
+    rows.push((
+        "composed part".into(),
+        format!(
+            "{:.3} mm relief, tiles aligned by their {}",
+            part.relief_mm,
+            match part.alignment {
+                crate::svbrdf::Alignment::Mean => "mean heights",
+                crate::svbrdf::Alignment::Top => "tops (mean alignment would exceed the relief budget)",
+            }
+        ),
+    ));
+    rows
+}
+
 /// The G-code table: "To mill this" — what a machinist needs first, then the program's numbers.
 /// The tile's relief against its budget, and what kept it there.
 fn relief_line(job: &super::Job, tile: &Tile) -> String {
@@ -116,7 +170,7 @@ pub(super) fn program(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviatio
         (
             "stock and relief".into(),
             format!(
-                "{:?}, at least {} × {} mm; the relief is {:.3} mm deep (design tile), the program cuts to {:.3} mm",
+                "{:?}, at least {} × {} mm; the relief is {:.3} mm deep (the design), the program cuts to {:.3} mm",
                 t.stock, t.area_mm[0], t.area_mm[1], relief_mm, s.depth_mm
             ),
         ),

@@ -149,37 +149,43 @@ pub fn gaussian(hf: &Heightfield, sigma_mm: f64) -> Heightfield {
 /// The slope density of a set of equal-area slopes on `domain` (bilinear splatting), normalised over the
 /// grid; also returns the fraction of slopes that fell outside it.
 pub fn ndf_of_slopes(slopes: &[(f64, f64)], domain: SlopeDomain) -> (SlopeGrid, f64) {
+    ndf_of_weighted_slopes(slopes, None, domain)
+}
+
+/// [`ndf_of_slopes`] with a weight per slope (its share of the area; `None`: all alike); the fraction
+/// outside is of the weight.
+pub fn ndf_of_weighted_slopes(slopes: &[(f64, f64)], weights: Option<&[f64]>, domain: SlopeDomain) -> (SlopeGrid, f64) {
     let empty = || SlopeGrid {
         domain,
         density: vec![0.0; domain.len()],
     };
-    let (mut g, outside) = slopes
-        .par_chunks(65_536)
-        .map(|chunk| {
+    const CHUNK: usize = 65_536;
+    let (mut g, outside, total) = slopes
+        .par_chunks(CHUNK)
+        .enumerate()
+        .map(|(k, chunk)| {
             let mut g = empty();
-            let mut out = 0usize;
-            for (p, q) in chunk {
+            let (mut out, mut total) = (0.0, 0.0);
+            for (n, (p, q)) in chunk.iter().enumerate() {
+                let w = weights.map_or(1.0, |w| w[k * CHUNK + n]);
+                total += w;
                 if *p < domain.p_min || *p > domain.p_max || *q < domain.q_min || *q > domain.q_max {
-                    out += 1;
+                    out += w;
                     continue;
                 }
-                splat(&mut g, *p, *q, 1.0);
+                splat(&mut g, *p, *q, w);
             }
-            (g, out)
+            (g, out, total)
         })
         .reduce(
-            || (empty(), 0),
+            || (empty(), 0.0, 0.0),
             |mut a, b| {
                 a.0.density.iter_mut().zip(&b.0.density).for_each(|(x, y)| *x += y);
-                (a.0, a.1 + b.1)
+                (a.0, a.1 + b.1, a.2 + b.2)
             },
         );
     g.normalise();
-    let frac = if slopes.is_empty() {
-        0.0
-    } else {
-        outside as f64 / slopes.len() as f64
-    };
+    let frac = if total > 0.0 { outside / total } else { 0.0 };
     (g, frac)
 }
 

@@ -15,11 +15,13 @@ pub(crate) mod explain;
 pub mod highlight;
 pub(crate) mod metrics;
 pub mod milled;
+pub mod regions;
 pub(crate) mod render;
 pub(crate) mod report;
 mod run;
 
 pub use metrics::{SurfaceMetrics, Tolerances};
+pub use regions::{RegionMetrics, RegionsMetrics};
 pub use run::{run, VerifyConfig, VerifyError, VerifyInput, VerifyOutput};
 
 use serde::{Deserialize, Serialize};

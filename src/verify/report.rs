@@ -30,12 +30,20 @@ impl Figure {
     }
 }
 
+/// What the page's verdict and metrics come from.
+pub enum Verdict<'a> {
+    /// One target.
+    Single(&'a Metrics),
+    /// A spatially varying target: one set of metrics per region.
+    Regions(&'a super::RegionsMetrics),
+}
+
 /// Everything the page shows.
 pub struct Report<'a> {
     /// Job name.
     pub title: String,
     /// The metrics.
-    pub metrics: &'a Metrics,
+    pub verdict: Verdict<'a>,
     /// Figures in order.
     pub figures: Vec<Figure>,
     /// Job parameters as (key, value).
@@ -96,7 +104,6 @@ fn metrics_table(design: &SurfaceMetrics, milled: &SurfaceMetrics) -> String {
 impl Report<'_> {
     /// The HTML text.
     pub fn to_html(&self) -> String {
-        let m = self.metrics;
         let b64 = base64::engine::general_purpose::STANDARD;
         let mut h = String::with_capacity(1 << 20);
         h.push_str("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">");
@@ -110,31 +117,10 @@ impl Report<'_> {
              figcaption{color:#555;font-size:.9em}table.kv th{background:#f6f6f6;font-weight:normal}</style></head><body>",
         );
         h.push_str(&format!("<h1>brdfmill report — {}</h1>", esc(&self.title)));
-        h.push_str(&format!(
-            "<p class=\"verdict {}\">{}</p>",
-            if m.pass { "ok" } else { "no" },
-            if m.pass {
-                "The simulated milled surface meets every tolerance against the target.".to_string()
-            } else {
-                let failed: Vec<String> = m
-                    .milled
-                    .checks
-                    .iter()
-                    .filter(|c| !c.pass)
-                    .map(|c| format!("{} = {} (needs {})", c.name, fmt(c.value), c.tolerance))
-                    .collect();
-                format!("The simulated milled surface falls short: {}.", failed.join("; "))
-            }
-        ));
-        if !m.notes.is_empty() {
-            h.push_str("<h2>Why</h2><ul>");
-            for n in &m.notes {
-                h.push_str(&format!("<li>{}</li>", esc(n)));
-            }
-            h.push_str("</ul>");
+        match self.verdict {
+            Verdict::Single(m) => single(&mut h, m),
+            Verdict::Regions(m) => regions(&mut h, m),
         }
-        h.push_str(&format!("<h2>Metrics</h2><p>Reference: {}.</p>", esc(&m.reference)));
-        h.push_str(&metrics_table(&m.design, &m.milled));
         for f in &self.figures {
             h.push_str(&format!(
                 "<h2>{}</h2><figure><img alt=\"{}\" src=\"data:image/png;base64,{}\"><figcaption>{}</figcaption></figure>",
@@ -157,5 +143,92 @@ impl Report<'_> {
         h.push_str(env!("CARGO_PKG_VERSION"));
         h.push_str(". The page is self-contained: it needs no network.</small></p></body></html>\n");
         h
+    }
+}
+
+fn failed(checks: &[super::metrics::Check]) -> Vec<String> {
+    checks
+        .iter()
+        .filter(|c| !c.pass)
+        .map(|c| format!("{} = {} (needs {})", c.name, fmt(c.value), c.tolerance))
+        .collect()
+}
+
+fn notes(h: &mut String, notes: &[String]) {
+    if !notes.is_empty() {
+        h.push_str("<h2>Why</h2><ul>");
+        for n in notes {
+            h.push_str(&format!("<li>{}</li>", esc(n)));
+        }
+        h.push_str("</ul>");
+    }
+}
+
+/// Verdict, reasons and metrics of a single target.
+fn single(h: &mut String, m: &Metrics) {
+    h.push_str(&format!(
+        "<p class=\"verdict {}\">{}</p>",
+        if m.pass { "ok" } else { "no" },
+        if m.pass {
+            "The simulated milled surface meets every tolerance against the target.".to_string()
+        } else {
+            format!(
+                "The simulated milled surface falls short: {}.",
+                failed(&m.milled.checks).join("; ")
+            )
+        }
+    ));
+    notes(h, &m.notes);
+    h.push_str(&format!("<h2>Metrics</h2><p>Reference: {}.</p>", esc(&m.reference)));
+    h.push_str(&metrics_table(&m.design, &m.milled));
+}
+
+/// Verdict, reasons and per-region metrics of a spatially varying target.
+fn regions(h: &mut String, m: &super::RegionsMetrics) {
+    let short: Vec<String> = m
+        .regions
+        .iter()
+        .filter(|r| !r.pass)
+        .map(|r| format!("region `{}`: {}", r.name, failed(&r.milled.checks).join("; ")))
+        .collect();
+    h.push_str(&format!(
+        "<p class=\"verdict {}\">{}</p>",
+        if m.pass { "ok" } else { "no" },
+        if m.pass {
+            format!(
+                "Every region of the simulated milled part ({}) meets every tolerance against its own target.",
+                m.regions
+                    .iter()
+                    .map(|r| format!("`{}`", r.name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        } else {
+            format!("The simulated milled part falls short: {}.", short.join("; "))
+        }
+    ));
+    notes(h, &m.notes);
+    h.push_str("<h2>Regions</h2><table class=\"metrics\"><tr><th>region</th><th>colour</th><th>target</th><th>share</th><th>border</th><th>measured</th></tr>");
+    for r in &m.regions {
+        h.push_str(&format!(
+            "<tr><td>{}</td><td><span style=\"display:inline-block;width:1em;height:1em;border:1px solid #888;background:{}\"></span> {}</td><td>{}</td><td>{:.0}%</td><td>{:.2} mm</td><td>{:.1} mm² (at least {:.2} mm from other regions)</td></tr>",
+            esc(&r.name),
+            esc(&r.color),
+            esc(&r.color),
+            esc(&r.target),
+            r.area_fraction * 100.0,
+            r.border_mm,
+            r.measured_mm2,
+            r.excluded_mm
+        ));
+    }
+    h.push_str("</table>");
+    for r in &m.regions {
+        h.push_str(&format!(
+            "<h2>Metrics: region `{}`</h2><p>Reference: the observed half-angle distribution of `{}`; the design is its own tile's facets convolved with the base lobe, the milled figures come from the region's cells away from its border.</p>",
+            esc(&r.name),
+            esc(&r.target)
+        ));
+        h.push_str(&metrics_table(&r.design, &r.milled));
     }
 }

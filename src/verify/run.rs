@@ -101,6 +101,9 @@ pub enum VerifyError {
         /// The edge band, cells.
         margin: usize,
     },
+    /// A region of a spatially varying target cannot be measured.
+    #[error("{0}")]
+    Region(String),
 }
 
 /// What verification compares: the products of the stages before it.
@@ -160,19 +163,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
     let n = input.ndf;
     let domain = n.config.domain();
     let tol = cfg.tolerances;
-    let facet_slopes: Vec<(f64, f64)> = input
-        .tile
-        .arrangement
-        .p
-        .iter()
-        .copied()
-        .zip(input.tile.arrangement.q.iter().copied())
-        .collect();
-    let (design_raw, _) = geometric::ndf_of_slopes(&facet_slopes, domain);
-    let design = match input.base {
-        Some(k) => normalised(k.convolve(&design_raw)),
-        None => design_raw,
-    };
+    let design = design_ndf(input.tile, input.base, domain);
     let (milled, outside, measurement) = milled_ndf(cfg, input)?;
     let cone_tan = input.cone_deg.to_radians().tan();
     let mut design_m = metrics::measure(&n.observed, &design, input.target, &cfg.incident_deg, &tol, cone_tan);
@@ -542,6 +533,17 @@ fn wave_patch(cfg: &VerifyConfig, input: &VerifyInput, margin: usize) -> Result<
         crate::analyze::wave_vs_geometric_png(&slice, &geo, &wi, max_slope),
         slice.albedo(),
     ))
+}
+
+/// The design tile's NDF: its facets' slopes (each facet's area alike) convolved with the base lobe.
+pub(super) fn design_ndf(tile: &Tile, base: Option<&Kernel>, domain: crate::slope::SlopeDomain) -> SlopeGrid {
+    let a = &tile.arrangement;
+    let facet_slopes: Vec<(f64, f64)> = a.p.iter().copied().zip(a.q.iter().copied()).collect();
+    let (raw, _) = geometric::ndf_of_slopes(&facet_slopes, domain);
+    match base {
+        Some(k) => normalised(k.convolve(&raw)),
+        None => raw,
+    }
 }
 
 fn normalised(mut g: SlopeGrid) -> SlopeGrid {
