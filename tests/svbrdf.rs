@@ -205,10 +205,13 @@ fn logo_example_mills_each_region_to_its_own_target() {
         );
     }
     // under a light along the view, a Beckmann surface of roughness α seen from above has radiance
-    // D(0)/4 = 1/(4πα²): 7.96 for the logo (α = 0.1) and 1.99 for the field (α = 0.2)
+    // D(0)/4 = 1/(4πα²): 7.96 for the logo (α = 0.1) and 1.99 for the field (α = 0.2); the picture shows the
+    // region as seen, whose slope variances are `as_seen_cov_ratio` of the target's, and a Gaussian's peak
+    // density goes as 1/(σx σy)
     let light = |k: usize, f: usize| regions[k]["light_radiance"][f].as_f64().unwrap();
     for (k, alpha) in [(0, 0.1), (1, 0.2)] {
-        let want = 1.0 / (4.0 * std::f64::consts::PI * alpha * alpha);
+        let seen = |a: usize| regions[k]["as_seen_cov_ratio"][a].as_f64().unwrap();
+        let want = 1.0 / (4.0 * std::f64::consts::PI * alpha * alpha * (seen(0) * seen(1)).sqrt());
         assert!(
             (light(k, 0) / want - 1.0).abs() < 0.15,
             "region {k}: {} against {want}",

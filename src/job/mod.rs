@@ -399,8 +399,12 @@ fn region_targets(t: &TargetSection, sv: &SvbrdfSection, dir: &Path) -> Result<V
             sv.region.len()
         ));
     }
-    if sv.region.len() > 16 {
-        return Err(format!("`[svbrdf]` has {} regions; at most 16", sv.region.len()));
+    if sv.region.len() > crate::svbrdf::MAX_REGIONS {
+        return Err(format!(
+            "`[svbrdf]` has {} regions; at most {}",
+            sv.region.len(),
+            crate::svbrdf::MAX_REGIONS
+        ));
     }
     let mut out: Vec<RegionTarget> = vec![];
     for (k, r) in sv.region.iter().enumerate() {
@@ -436,12 +440,22 @@ fn region_targets(t: &TargetSection, sv: &SvbrdfSection, dir: &Path) -> Result<V
 /// Read the label image of `[svbrdf]` against its regions and the work area, and refuse a region too small
 /// to hold one tile period.
 fn read_labels(job: &Job, sv: &SvbrdfSection, regions: &[RegionTarget], dir: &Path) -> Result<Labels, String> {
+    let f = &job.facets;
+    let [ax, ay] = job.toolpath.area_mm;
+    let pitch_mm = f.pitch_um * 1e-3;
+    let cells = (ax / pitch_mm).round() * (ay / pitch_mm).round();
+    if cells > crate::svbrdf::MAX_PART_CELLS as f64 {
+        return Err(format!(
+            "`[svbrdf]`: the composed part would be {cells:.0} cells (`toolpath.area_mm` = [{ax}, {ay}] at `facets.pitch_um` = {}); at most {}",
+            f.pitch_um,
+            crate::svbrdf::MAX_PART_CELLS
+        ));
+    }
     let path = dir.join(&sv.labels);
     let names: Vec<String> = regions.iter().map(|r| r.name.clone()).collect();
     let colors: Vec<[u8; 3]> = regions.iter().map(|r| r.color).collect();
     let labels =
         Labels::read(&path, &names, &colors, job.toolpath.area_mm).map_err(|e| format!("`svbrdf.labels`: {e}"))?;
-    let f = &job.facets;
     labels
         .check_period([f.facets_x as f64 * f.facet_mm, f.facets_y as f64 * f.facet_mm])
         .map_err(|e| format!("`svbrdf.region`: {e}"))?;

@@ -30,14 +30,15 @@ pub struct Part {
     pub offsets_mm: Vec<f64>,
     /// How the offsets were chosen.
     pub alignment: Alignment,
-    /// Highest minus lowest point of the part, mm.
+    /// Highest minus lowest point of the part, mm (at most the alignment's bound).
     pub relief_mm: f64,
 }
 
 /// Compose the part: `tiles[k]` (periodic, one per region, all of one size and pitch) where `labels` says
-/// region `k`, over `labels.area_mm`. The offsets put every tile's mean height at one level and the part's
-/// top at z = 0 — unless that needs more than `budget_mm` of relief (a shallow tile's mean sits high, a deep
-/// one's low), when every tile's top goes to z = 0 instead, which never needs more than the deepest tile.
+/// region `k`, over `labels.area_mm`. The offsets put every tile's mean height at one level and the highest
+/// tile top at z = 0 — unless that needs more than `budget_mm` of relief (a shallow tile's mean sits high, a
+/// deep one's low; 0: no budget), when every tile's top goes to z = 0 instead, which never needs more than
+/// the deepest tile. Either relief is a bound: a tile's highest or lowest cell may fall outside its region.
 pub fn compose(tiles: &[&Heightfield], labels: &Labels, budget_mm: f64) -> Result<Part, SvbrdfError> {
     let bad = |s: String| Err(SvbrdfError::Config(s));
     let Some(t0) = tiles.first() else {
@@ -74,7 +75,8 @@ pub fn compose(tiles: &[&Heightfield], labels: &Labels, budget_mm: f64) -> Resul
         .collect();
     let above = stats.iter().map(|s| s.2 - s.0).fold(0.0, f64::max);
     let below = stats.iter().map(|s| s.0 - s.1).fold(0.0, f64::max);
-    let (alignment, offsets_mm): (Alignment, Vec<f64>) = if above + below <= budget_mm + 1e-12 {
+    // a budget of 0 is no budget (as `facets.max_relief_mm`)
+    let (alignment, offsets_mm): (Alignment, Vec<f64>) = if budget_mm <= 0.0 || above + below <= budget_mm + 1e-12 {
         (Alignment::Mean, stats.iter().map(|s| -s.0 - above).collect())
     } else {
         (Alignment::Top, stats.iter().map(|s| -s.2).collect())

@@ -21,7 +21,7 @@
 mod compose;
 mod edt;
 
-pub use compose::{compose, Alignment, Part};
+pub use compose::{compose, Alignment, Part, MAX_PART_CELLS};
 pub use edt::distance_to_outside;
 
 use crate::plot::Canvas;
@@ -144,6 +144,9 @@ pub fn check_name(name: &str) -> Result<(), String> {
     }
 }
 
+/// The most regions a label image may have.
+pub const MAX_REGIONS: usize = 16;
+
 /// The largest label image file read, bytes.
 pub const MAX_FILE_BYTES: u64 = 64 << 20;
 
@@ -199,24 +202,40 @@ impl Labels {
                 ay / h as f64
             )));
         }
+        if colors.len() > MAX_REGIONS {
+            return Err(SvbrdfError::Config(format!(
+                "{} regions; at most {MAX_REGIONS}",
+                colors.len()
+            )));
+        }
         let mut index = Vec::with_capacity(w * h);
-        let mut strays: Vec<([u8; 3], usize, usize, usize)> = vec![];
+        // colours no region names: (first column, first row, count), for the message
+        let mut strays: std::collections::HashMap<[u8; 3], (usize, usize, usize)> = Default::default();
         for row in 0..h {
             for col in 0..w {
+                let px = img.pixel(col, row);
+                if matches!(img.channels, 2 | 4) && px[img.channels - 1] != 255 {
+                    return Err(bad(format!(
+                        "pixel (column {col}, row {row} from the top) is not opaque (alpha {}): a label image is exact colours, every pixel one region's",
+                        px[img.channels - 1]
+                    )));
+                }
                 let c = img.rgb(col, row);
                 match colors.iter().position(|k| *k == c) {
                     Some(k) => index.push(k as u8),
                     None => {
-                        match strays.iter_mut().find(|s| s.0 == c) {
-                            Some(s) => s.3 += 1,
-                            None => strays.push((c, col, row, 1)),
-                        }
+                        strays.entry(c).or_insert((col, row, 0)).2 += 1;
                         index.push(0);
                     }
                 }
             }
         }
-        if let Some(&(c, col, row, count)) = strays.iter().max_by_key(|s| s.3) {
+        // the most common stray colour, ties to the first seen
+        let worst = strays
+            .iter()
+            .max_by(|a, b| a.1 .2.cmp(&b.1 .2).then((b.1 .1, b.1 .0).cmp(&(a.1 .1, a.1 .0))))
+            .map(|(c, &(col, row, count))| (*c, col, row, count));
+        if let Some((c, col, row, count)) = worst {
             return Err(SvbrdfError::Unlabelled {
                 path: shown,
                 color: hex(c),

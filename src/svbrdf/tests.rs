@@ -142,7 +142,27 @@ fn the_part_takes_each_cell_from_its_regions_tile() {
     let part = compose(&[&a, &b], &l, 0.12).unwrap();
     assert_eq!(part.alignment, Alignment::Top);
     assert!((part.relief_mm - 0.15).abs() < 1e-12 && part.heightfield.range().1.abs() < 1e-12);
+    // no budget (0, as `facets.max_relief_mm`) never forces the tops together
+    assert_eq!(compose(&[&a, &b], &l, 0.0).unwrap().alignment, Alignment::Mean);
     // tiles of different sizes are refused
     let c = tile(6, 0.5, |_, _| 0.0);
     assert!(compose(&[&a, &c], &l, 1.0).is_err());
+}
+
+#[test]
+fn a_transparent_pixel_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("a.png");
+    let mut data = vec![];
+    for k in 0..16 {
+        data.extend_from_slice(&[0, 0, 0, if k == 5 { 128 } else { 255 }]);
+    }
+    let file = std::fs::File::create(&path).unwrap();
+    let mut e = png::Encoder::new(std::io::BufWriter::new(file), 4, 4);
+    e.set_color(png::ColorType::Rgba);
+    e.write_header().unwrap().write_image_data(&data).unwrap();
+    let e = Labels::read(&path, &names(), &[BLACK, WHITE], [4.0, 4.0])
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("not opaque") && e.contains("column 1, row 1"), "{e}");
 }

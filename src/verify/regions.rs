@@ -13,7 +13,7 @@
 //! - **Every point of the tile alike.** A region's shape holds parts of its tiles unequally (a strip of
 //!   the field above a logo holds some facet rows and not others), which weights facets unequally just as
 //!   a window of part of a tile would ([`super::milled`]): on the example's field the unweighted y variance
-//!   ratio came out 0.90 where the balanced one is 0.97. So each measured cell is weighted by one over the
+//!   ratio came out 0.85 where the balanced one is 0.97. So each measured cell is weighted by one over the
 //!   number of measured cells at its tile phase (its position modulo the period); a region that holds one
 //!   whole period clear of its border (the load checks one on the label image) holds every phase. The
 //!   unweighted figure, the region as seen, is kept beside it (`as_seen_cov_ratio`).
@@ -38,6 +38,9 @@ use serde::{Deserialize, Serialize};
 /// A band of the border profile is part of the border while its mean `|sim − design|` exceeds this many
 /// times the region interior's.
 pub const BORDER_FACTOR: f64 = 1.5;
+
+/// The label of simulated cells beyond the work area (where the toolpath cut the part's opposite edge).
+const OUTSIDE: u8 = u8::MAX;
 
 /// Width of the border profile's bands, mm.
 pub const BAND_MM: f64 = 0.01;
@@ -155,37 +158,59 @@ pub fn run(cfg: &VerifyConfig, input: &RegionsInput) -> Result<(RegionsMetrics, 
         .into_par_iter()
         .map(|c| {
             let (i, j) = (c % nx, c / nx);
-            input.labels.at(ox + (i as f64 + 0.5) * p, oy + (j as f64 + 0.5) * p) as u8
+            let (x, y) = (ox + (i as f64 + 0.5) * p, oy + (j as f64 + 0.5) * p);
+            let [ax, ay] = input.labels.area_mm;
+            if (0.0..=ax).contains(&x) && (0.0..=ay).contains(&y) {
+                input.labels.at(x, y) as u8
+            } else {
+                // beyond the work area the toolpath's margin holds the part's opposite edge: no region's
+                OUTSIDE
+            }
         })
         .collect();
     let edge = ((2.0 * input.tool_radius_mm + 2.0 * input.part.pitch_mm) / p).ceil() as usize
         + super::milled::reach_cells(p, input.stepover_mm);
     if nx <= 2 * edge + 2 || ny <= 2 * edge + 2 {
-        return Err(VerifyError::TooSmall {
-            side_mm: (nx.min(ny) as f64) * p,
-            margin: edge,
-        });
+        return Err(VerifyError::Region(format!(
+            "the simulated surface ({nx} × {ny} cells) is too small for its {edge}-cell edge band"
+        )));
     }
     let cells = [edge, edge, nx - 2 * edge, ny - 2 * edge];
     let slopes = geometric::stepover_slopes(hf, cells, input.raster_angle_deg, input.stepover_mm);
     let reach_mm = super::milled::reach_cells(p, input.stepover_mm) as f64 * p;
     let reference_mm = (4.0 * input.tool_radius_mm).max(1.0);
     let cone_tan = input.cone_deg.to_radians().tan();
+    // distance to the work area's edge, beyond which the toolpath cut the part's opposite edge (DESIGN.md
+    // §3.3): a ball centred within r of that seam can be lifted by it, so cells within 2r of the edge are
+    // neither in the border profile nor measured
+    let edge_mm: Vec<f64> = distance_to_outside(&label.iter().map(|&l| l == OUTSIDE).collect::<Vec<_>>(), nx, ny)
+        .into_iter()
+        .map(|d| d * p)
+        .collect();
+    let seam_mm = 2.0 * input.tool_radius_mm + reach_mm;
     let light = light_dirs();
     let mut out = vec![];
     let mut notes = vec![];
     let mut figures = vec![];
     for (k, r) in input.regions.iter().enumerate() {
-        let dist: Vec<f64> = distance_to_outside(&label.iter().map(|&l| l as usize != k).collect::<Vec<_>>(), nx, ny)
-            .into_iter()
-            .map(|d| d * p)
-            .collect();
-        let (profile, interior) = border_profile(&dist, &label, k, input.deviation, reference_mm);
+        // distance to the other regions (not the area's edge: the border is where two regions meet)
+        let dist: Vec<f64> = distance_to_outside(
+            &label
+                .iter()
+                .map(|&l| l as usize != k && l != OUTSIDE)
+                .collect::<Vec<_>>(),
+            nx,
+            ny,
+        )
+        .into_iter()
+        .map(|d| d * p)
+        .collect();
+        let (profile, interior) = border_profile(&dist, &edge_mm, seam_mm, &label, k, input.deviation, reference_mm);
         let border_mm = border_width(&profile, interior);
         let excluded_mm = border_mm + reach_mm;
         let inside = |i: usize, j: usize| {
             let c = (j + cells[1]) * nx + i + cells[0];
-            label[c] as usize == k && dist[c] >= excluded_mm
+            label[c] as usize == k && dist[c] >= excluded_mm && edge_mm[c] >= seam_mm
         };
         // the region's measured cells, each weighted by 1 / (cells of its tile phase), so every point of the
         // tile counts alike whatever part of the tiles the region's shape holds (module notes)
@@ -223,13 +248,6 @@ pub fn run(cfg: &VerifyConfig, input: &RegionsInput) -> Result<(RegionsMetrics, 
         };
         let milled = convolved(Some(&weights));
         let as_seen = metrics::measure(&r.ndf.observed, &convolved(None), r.target, &[], &tol, cone_tan);
-        if phase_coverage < 0.999 {
-            notes.push(format!(
-                "Region `{}`: its measured cells hold {:.1}% of its tile's points (a region should hold one whole tile period clear of its border): the milled NDF weights those it holds alike.",
-                r.name,
-                phase_coverage * 100.0
-            ));
-        }
         let [lo, hi] = tol.cov_ratio;
         if as_seen.cov_ratio.iter().any(|v| *v < lo || *v > hi) {
             notes.push(format!(
@@ -247,6 +265,14 @@ pub fn run(cfg: &VerifyConfig, input: &RegionsInput) -> Result<(RegionsMetrics, 
                 ..c.figure
             });
         }
+        // a region whose measured cells miss some points of its tile cannot show the tile's distribution
+        milled_m.checks.push(metrics::Check {
+            name: "tile points measured (phase coverage)".into(),
+            value: phase_coverage,
+            tolerance: "= 1 (every point of the tile clear of the border)".into(),
+            pass: phase_coverage >= 1.0,
+        });
+        milled_m.pass = milled_m.checks.iter().all(|c| c.pass);
         for c in milled_m.checks.iter().filter(|c| !c.pass) {
             notes.push(format!(
                 "Region `{}`: {} = {:.4} (needs {}).",
@@ -320,14 +346,22 @@ pub fn run(cfg: &VerifyConfig, input: &RegionsInput) -> Result<(RegionsMetrics, 
 }
 
 /// Mean `|sim − design|` per [`BAND_MM`] band of distance from the other regions, over region `k`'s assessed
-/// cells out to `reference_mm`, and the mean beyond (the interior; the farthest quarter of the bands when
+/// cells (at least `seam_mm` from the work area's edge) out to `reference_mm`, and the mean beyond (the interior; the farthest quarter of the bands when
 /// the region reaches no farther).
-fn border_profile(dist: &[f64], label: &[u8], k: usize, dev: &Deviation, reference_mm: f64) -> (Vec<[f64; 2]>, f64) {
+fn border_profile(
+    dist: &[f64],
+    edge_mm: &[f64],
+    seam_mm: f64,
+    label: &[u8],
+    k: usize,
+    dev: &Deviation,
+    reference_mm: f64,
+) -> (Vec<[f64; 2]>, f64) {
     let bands = (reference_mm / BAND_MM).ceil() as usize;
     let mut sum = vec![0.0; bands + 1];
     let mut n = vec![0usize; bands + 1];
-    for ((d, l), v) in dist.iter().zip(label).zip(&dev.map_um) {
-        if *l as usize != k || !v.is_finite() {
+    for (((d, e), l), v) in dist.iter().zip(edge_mm).zip(label).zip(&dev.map_um) {
+        if *l as usize != k || !v.is_finite() || *e < seam_mm {
             continue;
         }
         let b = ((d / BAND_MM) as usize).min(bands);
@@ -432,7 +466,7 @@ fn region_radiance(
 fn light_strip(hf: &Heightfield, cells: [usize; 4], light: &[[f64; 3]], alpha: f64) -> Canvas {
     let [i0, j0, w, h] = cells;
     let f = w.max(h).div_ceil(300).max(1);
-    let (fw, fh) = (w / f, h / f);
+    let (fw, fh) = ((w / f).max(1), (h / f).max(1));
     let frames: Vec<Vec<f64>> = light
         .iter()
         .map(|l| {
@@ -444,7 +478,8 @@ fn light_strip(hf: &Heightfield, cells: [usize; 4], light: &[[f64; 3]], alpha: f
                     for dj in 0..f {
                         for di in 0..f {
                             // picture rows top first: +y up
-                            let (i, j) = (i0 + x * f + di, j0 + (fh - 1 - y) * f + dj);
+                            let i = i0 + (x * f + di).min(w - 1);
+                            let j = j0 + ((fh - 1 - y) * f + dj).min(h - 1);
                             let (p, q) = cell_slopes(hf, i, j);
                             s += radiance(p, q, l, alpha);
                         }
