@@ -49,10 +49,18 @@ pub enum MotionMode {
     ArcCcw,
     /// G80 motion cancelled.
     Cancel,
+    /// G38.2–G38.5: a straight probing move that stops when the probe touches (`away`: loses contact),
+    /// with an alarm if it never does (unless `no_error`: G38.3, G38.5).
+    Probe {
+        /// G38.4/G38.5: until contact is lost.
+        away: bool,
+        /// G38.3/G38.5: no alarm without a change of contact.
+        no_error: bool,
+    },
 }
 
 impl MotionMode {
-    /// The motion mode of a group-1 G code in tenths (`0`, `10`, `20`, `30`, `800`).
+    /// The motion mode of a group-1 G code in tenths (`0`, `10`, `20`, `30`, `800`, `382`–`385`).
     #[must_use]
     pub fn from_tenths(t: i64) -> Option<MotionMode> {
         Some(match t {
@@ -61,6 +69,10 @@ impl MotionMode {
             20 => MotionMode::ArcCw,
             30 => MotionMode::ArcCcw,
             800 => MotionMode::Cancel,
+            382..=385 => MotionMode::Probe {
+                away: t >= 384,
+                no_error: t % 2 == 1,
+            },
             _ => return None,
         })
     }
@@ -74,6 +86,22 @@ impl MotionMode {
             MotionMode::ArcCw => "G2",
             MotionMode::ArcCcw => "G3",
             MotionMode::Cancel => "G80",
+            MotionMode::Probe {
+                away: false,
+                no_error: false,
+            } => "G38.2",
+            MotionMode::Probe {
+                away: false,
+                no_error: true,
+            } => "G38.3",
+            MotionMode::Probe {
+                away: true,
+                no_error: false,
+            } => "G38.4",
+            MotionMode::Probe {
+                away: true,
+                no_error: true,
+            } => "G38.5",
         }
     }
 

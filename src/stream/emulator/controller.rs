@@ -72,6 +72,22 @@ pub struct Controller {
     pub(super) sim_time_s: f64,
     pub(super) wco_counter: u8,
     pub(super) ovr_pending: bool,
+    /// The touch plate's machine Z (see `EmulatorConfig::probe_plate_z_mm`).
+    pub(super) probe_plate_z_mm: Option<f64>,
+    /// A probing cycle in progress: the fraction of its block where the contact changes, and whether it
+    /// has (GRBL's `sys_probe_state`).
+    pub(super) probing: Option<Probing>,
+    /// The last probe position, machine mm, and whether it succeeded (`[PRB:]`; a reset clears both).
+    pub(super) probe_result: ([f64; 3], bool),
+}
+
+/// A G38.x cycle in progress.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct Probing {
+    /// Fraction of the probing block at which the contact changes (`None`: it never does).
+    pub(super) trigger_at: Option<f64>,
+    /// The contact changed.
+    pub(super) hit: bool,
 }
 
 impl Controller {
@@ -116,6 +132,9 @@ impl Controller {
             sim_time_s: 0.0,
             wco_counter: 0,
             ovr_pending: false,
+            probe_plate_z_mm: cfg.probe_plate_z_mm,
+            probing: None,
+            probe_result: ([0.0; 3], false),
         };
         if c.setting(22) == 1.0 {
             c.state = State::Alarm; // HOMING_INIT_LOCK
@@ -310,6 +329,8 @@ impl Controller {
         self.jogging = false;
         self.jog_cancel = false;
         self.feed_override = 100;
+        self.probing = None;
+        self.probe_result = ([0.0; 3], false);
         if moving {
             self.say("ALARM:3");
             self.log.events.push("ALARM:3 (reset while in motion)".into());
@@ -334,6 +355,19 @@ impl Controller {
         self.say(&format!("ALARM:{code}"));
         self.say("[MSG:Reset to continue]");
         self.log.events.push(format!("ALARM:{code}"));
+    }
+
+    /// An alarm that `$X` or a reset clears and that still answers `?` (a probe failure): `ALARM:code`,
+    /// the state Alarm, motion already at rest.
+    pub(super) fn alarm_unlockable(&mut self, code: u16) {
+        self.state = State::Alarm;
+        self.say(&format!("ALARM:{code}"));
+        self.log.events.push(format!("ALARM:{code}"));
+    }
+
+    /// The probe is in contact with the tool tip at `p` (machine mm).
+    pub(super) fn probe_contact(&self, p: [f64; 3]) -> bool {
+        self.probe_plate_z_mm.is_some_and(|z| p[2] <= z)
     }
 
     /// GRBL's main loop: finish what the last line waits for, then read lines from the receive buffer.

@@ -85,7 +85,7 @@ impl Parsed {
             let int = v.trunc();
             let mantissa = ((v - int) * 10.0).round() as i32;
             match letter {
-                'G' => p.g_word(v, int as i32, mantissa, m)?,
+                'G' => p.g_word(int as i32, mantissa, m)?,
                 'M' => p.m_word(int as i32, mantissa, m)?,
                 letter => p.value_word(letter, v)?,
             }
@@ -102,7 +102,7 @@ impl Parsed {
         }
     }
 
-    fn g_word(&mut self, v: f64, g: i32, mantissa: i32, m: &mut Modal) -> Result<(), u16> {
+    fn g_word(&mut self, g: i32, mantissa: i32, m: &mut Modal) -> Result<(), u16> {
         match (g, mantissa) {
             (0..=3, 0) | (80, 0) => {
                 // Two of G0–G3 (or one and G10/G28/G30/G92) want the axis words: GRBL's axis command
@@ -190,9 +190,19 @@ impl Parsed {
             // are not supported (error:20)
             (61, 0) => self.group(GROUP_CONTROL_MODE)?,
             (61, _) => return Err(20),
-            (38, _) => {
-                self.unmodelled = Some(format!("G{v}"));
+            // G38.2–G38.5 probing: a motion mode (group 1) and an axis command, as G0–G3
+            (38, 2..=5) => {
+                if self.axis_command {
+                    return Err(24);
+                }
+                self.axis_command = true;
+                self.group(1)?;
+                self.motion = Some(MotionMode::Probe {
+                    away: mantissa >= 4,
+                    no_error: mantissa % 2 == 1,
+                });
             }
+            (38, _) => return Err(20),
             (_, 0) => return Err(20),
             _ => return Err(23),
         }
@@ -518,8 +528,14 @@ impl Controller {
         text: &str,
         inverse: bool,
     ) -> Result<Motion, u16> {
+        let probe = matches!(m.motion, MotionMode::Probe { .. });
         if !parsed.has_axis() {
-            return Ok(Motion::None);
+            // GRBL: a G38.x word without axis words is an error (26); any other motion mode just stays
+            return if probe && parsed.motion.is_some() {
+                Err(26)
+            } else {
+                Ok(Motion::None)
+            };
         }
         let feed = m.feed_mm_min.unwrap_or(0.0);
         if m.motion != MotionMode::Rapid && feed <= 0.0 {
@@ -527,9 +543,12 @@ impl Controller {
         }
         let kind = match m.motion {
             MotionMode::Rapid => BlockKind::Rapid,
-            MotionMode::Linear => BlockKind::Linear,
+            MotionMode::Linear | MotionMode::Probe { .. } => BlockKind::Linear,
             _ => self.arc(parsed, m, target, k, text)?,
         };
+        if probe && (0..3).all(|i| (target[i] - self.parser_pos[i]).abs() < 1e-9) {
+            return Err(33); // a probe to where the tool already is: invalid target
+        }
         if self.beyond_soft_limits(target) {
             return Ok(Motion::SoftLimit);
         }
@@ -607,9 +626,17 @@ impl Controller {
             }
             return;
         }
-        match block {
-            Some(b) => self.waiting = Some(Waiting::Plan(b)),
-            None => self.say("ok"),
+        match (block, m.motion) {
+            (Some((b, _)), MotionMode::Probe { away, no_error }) => {
+                self.waiting = Some(Waiting::Probe {
+                    block: b,
+                    away,
+                    no_error,
+                    started: false,
+                })
+            }
+            (Some(b), _) => self.waiting = Some(Waiting::Plan(b)),
+            (None, _) => self.say("ok"),
         }
     }
 }

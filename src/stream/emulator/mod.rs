@@ -14,8 +14,9 @@
 //! Modelled G-code: G0 G1 G2 G3 (offset form `I J K` in the G17, G18 or G19 plane) G4 G17 G18 G19 G20 G21 G40
 //! G80 G90 G91 G91.1 G93 G94 (inverse time: F on every motion block, a block takes 1/F minutes), work coordinates (G54–G59, G10 L2/L20, G92/G92.1, G43.1/G49, G53, G28/G28.1,
 //! G30/G30.1: see `interpreter`), M0 M1 M2 M30 M3 M4 M5 M7 M8 M9, F S T N P L words. Not modelled
-//! (answered `error:20`, and logged as such): G38.x probing, arcs in R form; G61 is accepted as GRBL's only path control mode (G61.1 and G64 answer `error:20`); `$SLP` (answered
-//! `error:3`). `$J=` jogging is modelled (state `Jog`, jog cancel 0x85, see `system`). Blocks cruise at their feed (no acceleration between them); a feed hold
+//! (answered `error:20`, and logged as such): arcs in R form; G61 is accepted as GRBL's only path control mode (G61.1 and G64 answer `error:20`); `$SLP` (answered
+//! `error:3`). G38.2–G38.5 probing is modelled against a touch plate (`probe_plate_z_mm`; see `planner`).
+//! `$J=` jogging is modelled (state `Jog`, jog cancel 0x85, see `system`). Blocks cruise at their feed (no acceleration between them); a feed hold
 //! decelerates at `$120`–`$122` along the planned path.
 //!
 //! **Faults** ([`Fault`]) fire once, on the first line carrying line number `N` (or the `k`-th line
@@ -85,6 +86,9 @@ pub struct EmulatorConfig {
     pub reconnect_delay: Duration,
     /// Keep a symbolic link here pointing at the current pseudo-terminal.
     pub link_path: Option<PathBuf>,
+    /// A touch plate for G38.x probing: the probe is in contact wherever the tool tip is at or below this
+    /// machine Z, mm (`None`: no probe connected, it never touches).
+    pub probe_plate_z_mm: Option<f64>,
 }
 
 impl Default for EmulatorConfig {
@@ -98,6 +102,7 @@ impl Default for EmulatorConfig {
             faults: Vec::new(),
             reconnect_delay: Duration::from_millis(50),
             link_path: None,
+            probe_plate_z_mm: None,
         }
     }
 }

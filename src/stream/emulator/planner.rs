@@ -87,6 +87,14 @@ pub(super) enum Waiting {
     Sync { dwell_s: f64, then: Option<Moves> },
     /// Dwelling until this simulated time, then the block's motion.
     Dwell { until_s: f64, then: Option<Moves> },
+    /// A G38.x probing move: it waits for the planner to empty, runs alone until the probe's contact
+    /// changes (or the move ends), and is answered once the machine has stopped (GRBL's `mc_probe_cycle`).
+    Probe {
+        block: Block,
+        away: bool,
+        no_error: bool,
+        started: bool,
+    },
 }
 
 /// A line's motion: one planner block, or two (G28/G30 through an intermediate point: the move home
@@ -201,6 +209,10 @@ impl Controller {
             } else {
                 f64::from(self.feed_override) / 100.0
             };
+            if self.probing.is_some() {
+                self.probe_trigger(dt, f);
+            }
+            let Some(b) = self.planner.front_mut() else { break };
             let remaining = (b.duration_s - b.elapsed_s) / f;
             if dt >= remaining {
                 dt -= remaining;
@@ -252,6 +264,12 @@ impl Controller {
                 });
                 return Served::Again;
             }
+            Waiting::Probe {
+                block,
+                away,
+                no_error,
+                started,
+            } => return self.serve_probe(block, away, no_error, started),
             Waiting::Dwell { until_s, then } => {
                 if self.sim_time_s < until_s {
                     self.waiting = Some(Waiting::Dwell { until_s, then });
@@ -270,6 +288,105 @@ impl Controller {
             self.start_cycle();
         }
         Served::Done
+    }
+
+    /// A probing cycle: once the planner is empty, refuse a probe already in the state it seeks
+    /// (`ALARM:4`), else run the move alone; once stopped, report `[PRB:]` (after `ALARM:5` when a G38.2 or
+    /// G38.4 never changed contact) and answer `ok`. The parser then continues from where the machine
+    /// stopped (GRBL's `gc_sync_position`), except after `ALARM:4`, when it never moved.
+    fn serve_probe(&mut self, block: Block, away: bool, no_error: bool, started: bool) -> Served {
+        let wait = |c: &mut Controller, block: Block, started: bool| {
+            c.waiting = Some(Waiting::Probe {
+                block,
+                away,
+                no_error,
+                started,
+            });
+            Served::Blocked
+        };
+        if !started {
+            if !self.planner.is_empty() {
+                self.start_cycle();
+                return wait(self, block, false);
+            }
+            if self.probe_contact(self.pos) != away {
+                self.alarm_unlockable(4);
+                self.parser_pos = self.pos;
+                self.say("ok");
+                return Served::Done;
+            }
+            // the fraction of the move where the tip crosses the plate, going down (toward) or up (away)
+            let (z0, z1) = (block.from[2], block.to[2]);
+            let trigger_at = self.probe_plate_z_mm.and_then(|zp| {
+                let crosses = if away { z1 > zp } else { z1 <= zp };
+                crosses.then(|| {
+                    if (z1 - z0).abs() < 1e-12 {
+                        0.0
+                    } else {
+                        ((zp - z0) / (z1 - z0)).clamp(0.0, 1.0)
+                    }
+                })
+            });
+            self.probing = Some(super::controller::Probing { trigger_at, hit: false });
+            self.planner.push_back(block.clone());
+            self.start_cycle();
+            return wait(self, block, true);
+        }
+        if !self.planner.is_empty() {
+            return wait(self, block, true);
+        }
+        let hit = self.probing.take().is_some_and(|p| p.hit);
+        if hit {
+            self.probe_result.1 = true;
+        } else if no_error {
+            self.probe_result = (self.pos, false);
+        } else {
+            self.probe_result.1 = false;
+            self.alarm_unlockable(5);
+        }
+        self.parser_pos = self.pos;
+        self.report_probe();
+        self.say("ok");
+        Served::Done
+    }
+
+    /// `[PRB:x,y,z:s]`: the last probe position (machine mm) and whether it succeeded.
+    pub(super) fn report_probe(&mut self) {
+        let ([x, y, z], ok) = self.probe_result;
+        self.say(&format!("[PRB:{x:.3},{y:.3},{z:.3}:{}]", u8::from(ok)));
+    }
+
+    /// The probe's contact changes `dt` simulated seconds into the head block: note where, and shorten
+    /// the block to where the motion cancel brings the machine to rest (`v²/2a` further, at `$120`–`$122`'s
+    /// least, as a feed hold).
+    fn probe_trigger(&mut self, dt: f64, f: f64) {
+        let Some(p) = self.probing.filter(|p| !p.hit) else {
+            return;
+        };
+        let Some(t_hit) = p.trigger_at else {
+            return;
+        };
+        let a = (120..=122)
+            .map(|k| self.setting(k))
+            .fold(f64::INFINITY, f64::min)
+            .max(1e-6);
+        let Some(b) = self.planner.front() else {
+            return;
+        };
+        if b.duration_s <= 0.0 || (b.elapsed_s + dt * f) / b.duration_s < t_hit {
+            return;
+        }
+        let v = self.block_speed_mm_s(b);
+        let len: f64 = (0..3).map(|i| (b.to[i] - b.from[i]).powi(2)).sum::<f64>().sqrt();
+        let t_end = (t_hit + v * v / (2.0 * a) / len.max(1e-12)).min(1.0);
+        let at = b.at(t_hit);
+        let end = b.at(t_end);
+        if let Some(b) = self.planner.front_mut() {
+            b.to = end;
+            b.duration_s *= t_end;
+        }
+        self.probe_result.0 = at;
+        self.probing = Some(super::controller::Probing { hit: true, ..p });
     }
 
     pub(super) fn planner_full(&self) -> bool {

@@ -76,14 +76,9 @@ enum Reply {
 }
 
 /// The `$G` number of a motion mode.
-fn motion_number(m: MotionMode) -> u8 {
-    match m {
-        MotionMode::Rapid => 0,
-        MotionMode::Linear => 1,
-        MotionMode::ArcCw => 2,
-        MotionMode::ArcCcw => 3,
-        MotionMode::Cancel => 80,
-    }
+fn motion_number(m: MotionMode) -> &'static str {
+    // the G code without its letter: `0` … `80`, `38.2` … `38.5`
+    &m.name()[1..]
 }
 
 /// The `$G` number of a spindle state (`M3`, `M4`, `M5`).
@@ -123,7 +118,7 @@ impl Controller {
                     self.say(&format!("[{g}:{:.3},{:.3},{:.3}]", v[0], v[1], v[2]));
                 }
                 self.say(&format!("[TLO:{:.3}]", self.tlo));
-                self.say("[PRB:0.000,0.000,0.000:0]");
+                self.report_probe();
             }
             "$G" => self.report_modes(),
             "$I" => {

@@ -383,3 +383,118 @@ fn jogging_follows_grbl() {
     assert_eq!(send(&mut c, "$J=G53X5F100\n"), "error:15\r\n");
     assert!(send(&mut c, "?").starts_with("<Idle"));
 }
+
+/// A stock controller with a touch plate at machine Z `plate`.
+fn with_plate(plate: Option<f64>) -> Controller {
+    let mut c = Controller::new(&EmulatorConfig {
+        probe_plate_z_mm: plate,
+        ..EmulatorConfig::default()
+    });
+    c.take_output();
+    c
+}
+
+/// Send a line and run simulated time until its answer arrives; everything the controller said.
+fn probe(c: &mut Controller, line: &str) -> String {
+    let mut out = send(c, line);
+    out.push_str(&run_until_ok(c, out.ends_with("ok\r\n")));
+    out
+}
+
+/// Run simulated time until the answer to the last line arrives (`done`: it already has).
+fn run_until_ok(c: &mut Controller, done: bool) -> String {
+    let mut out = String::new();
+    if done {
+        return out;
+    }
+    for _ in 0..10_000 {
+        c.advance(0.01);
+        out.push_str(&String::from_utf8(c.take_output()).unwrap());
+        if out.ends_with("ok\r\n") {
+            break;
+        }
+    }
+    out
+}
+
+/// G38.2 as GRBL 1.1h's `mc_probe_cycle`: the move stops where the probe touches, plus the motion
+/// cancel's deceleration `v²/2a`; `[PRB:]` gives the touch point in machine coordinates, then `ok`; the
+/// parser continues from where the machine stopped.
+#[test]
+fn a_probe_stops_at_the_plate_and_reports_where() {
+    let mut c = with_plate(Some(-5.0));
+    assert_eq!(send(&mut c, "G38.2Z-10F120\n"), "", "the answer waits for the cycle");
+    let out = run_until_ok(&mut c, false);
+    assert_eq!(out, "[PRB:0.000,0.000,-5.000:1]\r\nok\r\n");
+    // 120 mm/min = 2 mm/s against $122 = 10 mm/s² (the least of $120–$122): 0.2 mm past the plate
+    let a = (120..=122).map(|k| c.setting(k)).fold(f64::INFINITY, f64::min);
+    let over = 2.0f64.powi(2) / (2.0 * a);
+    assert!(
+        (c.position()[2] - (-5.0 - over)).abs() < 1e-9,
+        "stopped at {:?}",
+        c.position()
+    );
+    assert!(send(&mut c, "$#\n").contains("[PRB:0.000,0.000,-5.000:1]"));
+    assert!(send(&mut c, "$G\n").starts_with("[GC:G38.2 "), "G38.2 is modal");
+    // relative to where the machine is, not to the programmed Z-10
+    assert_eq!(send(&mut c, "G91G0Z1\n"), "ok\r\n");
+    for _ in 0..100 {
+        c.advance(0.05);
+    }
+    assert!((c.position()[2] - (-4.0 - over)).abs() < 1e-9, "{:?}", c.position());
+    // a reset clears the probe's record
+    send(&mut c, "\x18");
+    assert!(send(&mut c, "$#\n").contains("[PRB:0.000,0.000,0.000:0]"));
+}
+
+#[test]
+fn a_probe_that_never_touches_alarms_unless_told_not_to() {
+    // G38.2 through the whole move without contact: ALARM:5, the record unchanged and failed, then ok;
+    // the alarm answers `?` and `$X`, and locks G-code until then
+    let mut c = with_plate(Some(-5.0));
+    assert_eq!(
+        probe(&mut c, "G38.2Z-3F300\n"),
+        "ALARM:5\r\n[PRB:0.000,0.000,0.000:0]\r\nok\r\n"
+    );
+    assert!((c.position()[2] + 3.0).abs() < 1e-9);
+    assert!(send(&mut c, "?").starts_with("<Alarm|"));
+    assert_eq!(send(&mut c, "G0Z0\n"), "error:9\r\n");
+    assert!(send(&mut c, "$X\n").ends_with("ok\r\n"));
+    // G38.3: no alarm, the record is where the move ended
+    assert_eq!(probe(&mut c, "G38.3Z-4F300\n"), "[PRB:0.000,0.000,-4.000:0]\r\nok\r\n");
+    // no probe connected: a G38.2 never touches either
+    let mut c = with_plate(None);
+    assert!(probe(&mut c, "G38.2Z-1F300\n").starts_with("ALARM:5\r\n"));
+}
+
+#[test]
+fn a_probe_already_in_the_state_it_seeks_is_refused_and_away_probes_lose_contact() {
+    // the tip starts on the plate (contact at z ≤ 0): G38.2 raises ALARM:4 before moving, no [PRB:]
+    let mut c = with_plate(Some(0.0));
+    assert_eq!(probe(&mut c, "G38.2Z-1F100\n"), "ALARM:4\r\nok\r\n");
+    assert_eq!(c.position(), [0.0; 3]);
+    send(&mut c, "$X\n");
+    // G38.4 from contact: the contact is lost as soon as the tip rises above the plate
+    assert_eq!(probe(&mut c, "G38.4Z2F100\n"), "[PRB:0.000,0.000,0.000:1]\r\nok\r\n");
+    assert!(c.position()[2] > 0.0 && c.position()[2] < 2.0);
+    // G38.5 from out of contact: ALARM:4 too (the away probes seek the loss of contact)
+    assert_eq!(probe(&mut c, "G38.5Z3F100\n"), "ALARM:4\r\nok\r\n");
+}
+
+#[test]
+fn probe_blocks_are_checked_as_grbl_checks_them() {
+    let mut c = with_plate(Some(-5.0));
+    assert_eq!(send(&mut c, "G38.2F100\n"), "error:26\r\n", "no axis words");
+    assert_eq!(send(&mut c, "G38.2Z-1\n"), "error:22\r\n", "no feed yet");
+    assert_eq!(send(&mut c, "G38.2Z0F100\n"), "error:33\r\n", "target is the position");
+    assert_eq!(send(&mut c, "G38.1Z-1F100\n"), "error:20\r\n");
+    assert_eq!(send(&mut c, "G38.6Z-1F100\n"), "error:20\r\n");
+    assert_eq!(send(&mut c, "G0G38.2Z-1F100\n"), "error:24\r\n", "two axis commands");
+    // check mode: the block is answered, nothing moves, nothing is probed
+    assert!(send(&mut c, "$C\n").contains("ok"));
+    assert_eq!(send(&mut c, "G38.2Z-10F100\n"), "ok\r\n");
+    for _ in 0..10 {
+        c.advance(0.1);
+    }
+    assert_eq!(c.position(), [0.0; 3]);
+}
