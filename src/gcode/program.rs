@@ -399,6 +399,13 @@ fn apply(ws: &[Word], modal: &mut Modal, pos: &mut Position, line: &mut Line) {
                     modal.arc_distance = Distance::Absolute;
                 } else if same(g, 91.1) {
                     modal.arc_distance = Distance::Incremental;
+                } else if let Some(m) = [38.2, 38.3, 38.4, 38.5]
+                    .iter()
+                    .position(|&p| same(g, p))
+                    .and_then(|k| MotionMode::from_tenths(382 + k as i64))
+                {
+                    // G38.2–G38.5 are a motion mode (group 1), as in GRBL: later axis-only lines probe too
+                    motion_word = Some(m);
                 } else if same(g, 28.0) || same(g, 30.0) || same(g, 53.0) || same(g, 92.0) || (38.0..39.0).contains(&g)
                 {
                     non_modal_motion = true;
@@ -449,7 +456,12 @@ fn apply(ws: &[Word], modal: &mut Modal, pos: &mut Position, line: &mut Line) {
         modal.motion = m;
     }
     let has_axis = axis.iter().any(Option::is_some);
-    if non_modal_motion {
+    // a probing move stops wherever the probe touches: where it ends is unknowable here
+    let probing = has_axis && matches!(modal.motion, MotionMode::Probe { .. });
+    if probing {
+        line.motion = Some(modal.motion);
+    }
+    if non_modal_motion || probing {
         line.breaks_position = true;
         line.moves = true;
         *pos = [None; 3];
@@ -515,6 +527,26 @@ mod tests {
         assert!((l[5].end_mm[0].unwrap() - 27.4).abs() < 1e-9);
         assert_eq!(l[5].before.feed_mm_min, Some(200.0));
         assert!((p.lines[5].end_mm[0].unwrap() - (2.0 + 25.4)).abs() < 1e-9);
+    }
+
+    #[test]
+    fn probing_is_modal_and_ends_where_it_touches() {
+        let p = prog("G0 X1 Y1\nG38.2 Z-5 F50\nZ-6\nG0 Z2\nX3\n");
+        let l = &p.lines;
+        for k in [1, 2] {
+            assert!(l[k].moves && l[k].breaks_position, "line {k} probes");
+            assert_eq!(l[k].end_mm, [None; 3]);
+            assert!(matches!(
+                l[k].motion,
+                Some(MotionMode::Probe {
+                    away: false,
+                    no_error: false
+                })
+            ));
+        }
+        // G0 ends the probing mode; Z is known again, X and Y only once given
+        assert_eq!(l[3].end_mm, [None, None, Some(2.0)]);
+        assert_eq!(l[4].end_mm, [Some(3.0), None, Some(2.0)]);
     }
 
     #[test]
