@@ -3,8 +3,8 @@
 //! §6.2). Only sequencing lives here, as in [`super::run`].
 
 use super::run::{
-    design_stage, empty_outcome, facets_stage, listed, ndf_stage, program_and_cut, scallop_lobe, stage_err,
-    stepover_mm, Cut, Out, Outcome, Progress, Stage,
+    design_stage, empty_outcome, facets_stage, ndf_stage, program_and_cut, scallop_lobe, stage_err, stepover_mm, Cut,
+    Out, Outcome, Progress, Stage,
 };
 use super::{JobError, Ready};
 use crate::svbrdf;
@@ -171,7 +171,7 @@ pub(super) fn run(
             &sim,
         ),
         program: super::summary::program(ready, &program.summary, part.relief_mm, &dev),
-        artifacts: listed(&o.written_files()),
+        artifacts: o.listed(),
     }
     .to_html();
     o.write("report.html", html.as_bytes())?;

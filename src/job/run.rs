@@ -181,9 +181,9 @@ impl<'a> Out<'a> {
         r
     }
 
-    /// The files written so far.
-    pub(super) fn written_files(&self) -> Vec<PathBuf> {
-        self.written.clone()
+    /// The report's artifact table of the files written so far.
+    pub(super) fn listed(&self) -> Vec<(String, String)> {
+        listed(&self.written)
     }
 
     /// A stage starts.
@@ -334,7 +334,7 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
         figures,
         parameters: super::summary::parameters(ready, &nd.ndf, &tile, &sim),
         program: super::summary::program(ready, &program.summary, outcome.relief_mm.unwrap_or(0.0), &dev),
-        artifacts: listed(&o.written),
+        artifacts: o.listed(),
     }
     .to_html();
     o.write("report.html", html.as_bytes())?;
@@ -585,7 +585,7 @@ fn simulate_stage(
 }
 
 /// The artifact table of the report.
-pub(super) fn listed(written: &[PathBuf]) -> Vec<(String, String)> {
+fn listed(written: &[PathBuf]) -> Vec<(String, String)> {
     let mut listed: Vec<(String, String)> = written
         .iter()
         .map(|p| {

@@ -189,6 +189,7 @@ pub fn run(cfg: &VerifyConfig, input: &RegionsInput) -> Result<(RegionsMetrics, 
         .collect();
     let seam_mm = 2.0 * input.tool_radius_mm + reach_mm;
     let light = light_dirs();
+    let fractions = input.labels.fractions();
     let mut out = vec![];
     let mut notes = vec![];
     let mut figures = vec![];
@@ -290,7 +291,7 @@ pub fn run(cfg: &VerifyConfig, input: &RegionsInput) -> Result<(RegionsMetrics, 
             name: r.name.to_string(),
             color: hex(input.labels.colors[k]),
             target: r.spec.to_string(),
-            area_fraction: input.labels.fractions()[k],
+            area_fraction: fractions[k],
             border_mm,
             excluded_mm,
             measured_cells,
