@@ -271,13 +271,9 @@ fn ten_thousand_lines_at_115200_baud() {
     );
     assert_eq!(w.lines, expected, "the wire carries every line once, in order");
     assert_eq!((w.oks, w.errors.len()), (10_000, 0), "{:?}", w.errors);
-    // The link is slower than the controller: the streamer waits on it thousands of times, each time with
-    // the buffer too full for the next line, and GRBL's reports were checked against the wire.
-    assert!(
-        w.waits_with_lines_queued >= 1_000,
-        "{} waits",
-        w.waits_with_lines_queued
-    );
+    // How often the streamer waited on the link (printed above) depends on how fast this machine runs the
+    // streamer against the paced link: a wall-clock figure, measured as the link's share by
+    // `examples/bench_stream.rs`, not asserted here. What every wait must satisfy is checked in `replay`.
     assert!(w.status_reports >= 1, "no status report to check");
     // The streamer's own figures agree with the wire.
     assert_eq!(stats.max_in_flight, w.max_in_flight);
@@ -314,7 +310,7 @@ fn character_counting_keeps_many_short_lines_in_flight() {
         w.waits_with_lines_queued, w.min_lines_in_flight_at_wait
     );
     assert_eq!(w.lines, expected);
-    assert!(w.waits_with_lines_queued >= 100, "{} waits", w.waits_with_lines_queued);
+    // the number of waits is a wall-clock figure (see above); the bound holds at every one of them
     assert!(
         w.min_lines_in_flight_at_wait >= floor && floor >= 14,
         "{} lines in flight at a wait, bound {floor}",
