@@ -10,14 +10,101 @@ use rayon::prelude::*;
 /// sampling of the opening itself, see `simulate::deviation`).
 pub const REACH_TOLERANCE_UM: f64 = 0.25;
 
-/// `out[i] = max(out[i], src[i] + b)`: the inner loop of every dilation here and in the drop-cutter. Written
+/// `out[i] = max(out[i], src[i] + b)`: one kernel entry over a run of outputs ([`max_plus`]'s tail). Written
 /// as a select (`if v > o { v } else { o }`), which compiles to packed `max` instructions; a conditional
 /// store compiled to a compare and branch per element and ran at half the speed.
-#[inline]
-pub fn max_add(out: &mut [f64], src: &[f64], b: f64) {
+#[inline(always)]
+fn max_add(out: &mut [f64], src: &[f64], b: f64) {
     for (o, s) in out.iter_mut().zip(src) {
         let v = s + b;
         *o = if v > *o { v } else { *o };
+    }
+}
+
+/// Outputs per register block of [`max_plus`].
+const LANES: usize = 16;
+
+/// `out[i] = max(out[i], max_k src[i + k] + kernel[k])` for every `i`: one row of a max-plus correlation, the
+/// inner loop of every ball dilation here and in the drop-cutter (`kernel` is the bit's underside along one
+/// row of its footprint, `−prof(√(dx² + dy²))` for consecutive `dx`). `src` holds at least
+/// `out.len() + kernel.len() − 1` samples.
+///
+/// Outputs are taken [`LANES`] at a time and held in registers across the whole kernel, so each step is one
+/// load of `src`, an add and a `max` (a select, which compiles to packed `max` instructions); the loop that
+/// swept all of `out` once per kernel entry also loaded and stored `out` at every step, and that store was
+/// its bound. `max` is exact, so the order in which the entries are taken does not change a bit of the result.
+pub fn max_plus(out: &mut [f64], src: &[f64], kernel: &[f64]) {
+    pulp::Arch::new().dispatch(MaxPlus { out, src, kernel });
+}
+
+/// [`max_plus`]'s arguments, run by `pulp` with the widest vector instructions this CPU has (AVX2 or
+/// AVX-512 where present; the baseline x86-64 build has only SSE2's two lanes).
+struct MaxPlus<'a> {
+    out: &'a mut [f64],
+    src: &'a [f64],
+    kernel: &'a [f64],
+}
+
+impl pulp::WithSimd for MaxPlus<'_> {
+    type Output = ();
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) {
+        max_plus_lanes(self.out, self.src, self.kernel);
+    }
+}
+
+/// [`max_plus`]'s loop, inlined into each instruction set's version of its caller.
+#[inline(always)]
+fn max_plus_lanes(out: &mut [f64], src: &[f64], kernel: &[f64]) {
+    let (n, w) = (out.len(), kernel.len());
+    if w == 0 {
+        return;
+    }
+    assert!(
+        src.len() + 1 >= n + w,
+        "max_plus: {} source samples for {n} outputs of a {w}-wide kernel",
+        src.len()
+    );
+    let full = n - n % LANES;
+    for c in (0..full).step_by(LANES) {
+        let mut acc = [0.0; LANES];
+        acc.copy_from_slice(&out[c..c + LANES]);
+        let s = &src[c..c + w + LANES - 1];
+        for (k, &b) in kernel.iter().enumerate() {
+            let v = &s[k..k + LANES];
+            for l in 0..LANES {
+                let x = v[l] + b;
+                acc[l] = if x > acc[l] { x } else { acc[l] };
+            }
+        }
+        out[c..c + LANES].copy_from_slice(&acc);
+    }
+    for (k, &b) in kernel.iter().enumerate() {
+        max_add(&mut out[full..], &src[full + k..n + k], b);
+    }
+}
+
+/// `buf[k] = row[first + k]` for every `k`: the row seen through a window that may overhang it, wrapped
+/// around when `periodic`, `−∞` (no sample) beyond its ends otherwise; copied in whole runs.
+pub fn pad_row(row: &[f64], first: isize, periodic: bool, buf: &mut [f64]) {
+    let (nx, n) = (row.len() as isize, buf.len());
+    if periodic {
+        let mut k = 0;
+        while k < n {
+            let i = (first + k as isize).rem_euclid(nx) as usize;
+            let len = (row.len() - i).min(n - k);
+            buf[k..k + len].copy_from_slice(&row[i..i + len]);
+            k += len;
+        }
+        return;
+    }
+    let lo = (-first).clamp(0, n as isize) as usize;
+    let hi = (nx - first).clamp(lo as isize, n as isize) as usize;
+    buf[..lo].fill(f64::NEG_INFINITY);
+    buf[hi..].fill(f64::NEG_INFINITY);
+    if hi > lo {
+        let i = (first + lo as isize) as usize;
+        buf[lo..hi].copy_from_slice(&row[i..i + hi - lo]);
     }
 }
 
@@ -33,51 +120,43 @@ pub fn dilate(z: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool:
     let r = bit.radius_mm();
     let m = (r / pitch).ceil() as usize + 1;
     let mi = m as i64;
-    // offsets (dj, [(di, -prof)])
-    let rows: Vec<(i64, Vec<(i64, f64)>)> = (-mi..=mi)
-        .map(|dj| {
+    // per row offset dj: the first column offset within the circle and the underside from there on (the
+    // offsets within a circle are one run of columns)
+    let within = |di: i64, dy: f64| {
+        let dx = di as f64 * pitch;
+        let d2 = dx * dx + dy * dy;
+        (d2 <= r * r * (1.0 + 1e-12)).then(|| -bit.profile(d2.sqrt().min(r)))
+    };
+    let rows: Vec<(i64, i64, Vec<f64>)> = (-mi..=mi)
+        .filter_map(|dj| {
             let dy = dj as f64 * pitch;
-            let offs = (-mi..=mi)
-                .filter_map(|di| {
-                    let dx = di as f64 * pitch;
-                    let d2 = dx * dx + dy * dy;
-                    (d2 <= r * r * (1.0 + 1e-12)).then(|| (di, -bit.profile(d2.sqrt().min(r))))
-                })
-                .collect::<Vec<_>>();
-            (dj, offs)
+            let first = (-mi..=mi).find(|&di| within(di, dy).is_some())?;
+            let kern: Vec<f64> = (first..=mi).map_while(|di| within(di, dy)).collect();
+            Some((dj, first, kern))
         })
-        .filter(|(_, o)| !o.is_empty())
         .collect();
+    // every row padded by m columns either side once, so each output row reads its source rows in place
+    let w = nx + 2 * m;
+    let mut padded = vec![0.0; w * ny];
+    padded
+        .par_chunks_mut(w)
+        .zip(z.par_chunks(nx))
+        .for_each(|(buf, row)| pad_row(row, -(m as isize), periodic, buf));
     let mut out = vec![f64::NEG_INFINITY; nx * ny];
-    out.par_chunks_mut(nx).enumerate().for_each_init(
-        || vec![0.0; nx + 2 * m],
-        |buf, (j, orow)| {
-            for (dj, offs) in &rows {
-                let jj = j as i64 + dj;
-                let jj = if periodic {
-                    jj.rem_euclid(ny as i64) as usize
-                } else if jj < 0 || jj >= ny as i64 {
-                    continue;
-                } else {
-                    jj as usize
-                };
-                let src = &z[jj * nx..(jj + 1) * nx];
-                for (k, v) in buf.iter_mut().enumerate() {
-                    let i = k as i64 - mi;
-                    *v = if periodic {
-                        src[i.rem_euclid(nx as i64) as usize]
-                    } else if i < 0 || i >= nx as i64 {
-                        f64::NEG_INFINITY
-                    } else {
-                        src[i as usize]
-                    };
-                }
-                for &(di, b) in offs {
-                    max_add(orow, &buf[(mi + di) as usize..(mi + di) as usize + nx], b);
-                }
-            }
-        },
-    );
+    out.par_chunks_mut(nx).enumerate().for_each(|(j, orow)| {
+        for (dj, first, kern) in &rows {
+            let jj = j as i64 + dj;
+            let jj = if periodic {
+                jj.rem_euclid(ny as i64) as usize
+            } else if jj < 0 || jj >= ny as i64 {
+                continue;
+            } else {
+                jj as usize
+            };
+            let k0 = jj * w + (mi + first) as usize;
+            max_plus(orow, &padded[k0..k0 + nx + kern.len() - 1], kern);
+        }
+    });
     out
 }
 
@@ -134,6 +213,74 @@ mod tests {
     use super::*;
     use crate::brdf::Brdf;
     use crate::{facets, ndf};
+
+    #[test]
+    fn max_plus_equals_the_direct_maximum() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
+        // outputs across the lane block boundaries, kernels from one entry to wider than the block
+        for (n, w) in [(1, 1), (15, 3), (16, 1), (17, 5), (40, 33), (63, 16), (100, 7)] {
+            let src: Vec<f64> = (0..n + w - 1).map(|_| rng.gen_range(-1.0..1.0)).collect();
+            let kernel: Vec<f64> = (0..w).map(|_| rng.gen_range(-1.0..0.0)).collect();
+            let start: Vec<f64> = (0..n)
+                .map(|k| if k % 3 == 0 { 0.5 } else { f64::NEG_INFINITY })
+                .collect();
+            let mut out = start.clone();
+            max_plus(&mut out, &src, &kernel);
+            for i in 0..n {
+                let want = (0..w).map(|k| src[i + k] + kernel[k]).fold(start[i], f64::max);
+                assert_eq!(out[i], want, "n {n} w {w} at {i}");
+            }
+        }
+    }
+
+    #[test]
+    fn pad_row_wraps_or_pads_with_nothing() {
+        let row = [1.0, 2.0, 3.0];
+        let mut buf = [0.0; 8];
+        pad_row(&row, -2, true, &mut buf);
+        assert_eq!(buf, [2.0, 3.0, 1.0, 2.0, 3.0, 1.0, 2.0, 3.0]);
+        let ninf = f64::NEG_INFINITY;
+        pad_row(&row, -2, false, &mut buf);
+        assert_eq!(buf, [ninf, ninf, 1.0, 2.0, 3.0, ninf, ninf, ninf]);
+        pad_row(&row, 5, false, &mut buf[..2]);
+        assert_eq!(buf[..2], [ninf, ninf]);
+        pad_row(&row, 1, false, &mut buf[..2]);
+        assert_eq!(buf[..2], [2.0, 3.0]);
+    }
+
+    #[test]
+    fn dilation_equals_the_direct_maximum_over_the_ball() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(4);
+        let (nx, ny, p) = (37, 23, 0.01);
+        let z: Vec<f64> = (0..nx * ny).map(|_| rng.gen_range(-0.05..0.0)).collect();
+        for periodic in [true, false] {
+            let tool = Shape::Ball { diameter_mm: 0.09 };
+            let d = dilate(&z, nx, ny, p, periodic, &tool);
+            let r: f64 = 0.045;
+            let m = (r / p).ceil() as i64 + 1;
+            for j in 0..ny as i64 {
+                for i in 0..nx as i64 {
+                    let mut best = f64::NEG_INFINITY;
+                    for dj in -m..=m {
+                        for di in -m..=m {
+                            let (dx, dy) = (di as f64 * p, dj as f64 * p);
+                            let (ii, jj) = (i + di, j + dj);
+                            let inside = (0..nx as i64).contains(&ii) && (0..ny as i64).contains(&jj);
+                            if dx * dx + dy * dy > r * r * (1.0 + 1e-12) || (!periodic && !inside) {
+                                continue;
+                            }
+                            let (ii, jj) = (ii.rem_euclid(nx as i64), jj.rem_euclid(ny as i64));
+                            let prof = tool.profile((dx * dx + dy * dy).sqrt().min(r));
+                            best = best.max(z[(jj * nx as i64 + ii) as usize] - prof);
+                        }
+                    }
+                    assert_eq!(d[(j * nx as i64 + i) as usize], best, "periodic {periodic} ({i},{j})");
+                }
+            }
+        }
+    }
 
     #[test]
     fn the_decimated_opening_stays_within_its_sampling_bound_of_the_full_one() {

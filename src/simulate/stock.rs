@@ -87,46 +87,14 @@ pub fn sweep(grid: &Grid, top: f64, bit: Shape, segs: &[Segment]) -> (Vec<f64>, 
         .enumerate()
         .map(|(t, bin)| {
             let (ti, tj) = (t % tx, t / tx);
-            let (ci0, cj0) = (ti * TILE, tj * TILE);
-            let w = TILE.min(grid.nx - ci0);
-            let h = TILE.min(grid.ny - cj0);
-            let mut cells = vec![top; w * h];
-            let mut swept = 0u64;
-            let mut rapid = vec![];
-            let x_first = grid.x0 + (ci0 as f64 + 0.5) * grid.pitch;
-            for &k in bin {
-                let sw = &sweeps[k as usize];
-                let is_rapid = segs[k as usize].kind == SegmentKind::Rapid;
-                let mut lowered = false;
-                for j in 0..h {
-                    let y = grid.y0 + ((cj0 + j) as f64 + 0.5) * grid.pitch;
-                    let Some((lo, hi)) = sw.row_span(y) else { continue };
-                    // cells whose centre may lie in [lo, hi]
-                    let a = ((lo - x_first) / grid.pitch).ceil().max(0.0);
-                    let b = ((hi - x_first) / grid.pitch).floor().min(w as f64 - 1.0);
-                    if a > b {
-                        continue;
-                    }
-                    let (a, b) = (a as usize, b as usize);
-                    let row = &mut cells[j * w + a..=j * w + b];
-                    swept += row.len() as u64;
-                    // in chunks: skip those where nothing stands above the lowest the segment can reach
-                    for (c, chunk) in row.chunks_mut(CHUNK).enumerate() {
-                        let xa = x_first + (a + c * CHUNK) as f64 * grid.pitch;
-                        let xb = xa + (chunk.len() - 1) as f64 * grid.pitch;
-                        let floor = sw.floor(xa, xb, y);
-                        if chunk.iter().all(|v| *v <= floor) {
-                            continue;
-                        }
-                        let (_, low) = sw.row(y, xa, grid.pitch, chunk);
-                        lowered |= low;
-                    }
-                }
-                if lowered && is_rapid {
-                    rapid.push(k as usize);
-                }
-            }
-            (cells, swept, rapid)
+            pulp::Arch::new().dispatch(TileSweep {
+                grid,
+                top,
+                corner: (ti * TILE, tj * TILE),
+                bin,
+                sweeps: &sweeps,
+                segs,
+            })
         })
         .collect();
     let mut z = vec![top; grid.nx * grid.ny];
@@ -148,6 +116,74 @@ pub fn sweep(grid: &Grid, top: f64, bit: Shape, segs: &[Segment]) -> (Vec<f64>, 
     report.rapid_cuts.sort_unstable();
     report.rapid_cuts.dedup();
     (z, report)
+}
+
+/// One tile's sweep, run by `pulp` with the widest vector instructions this CPU has, so that the
+/// per-cell closed forms of [`Sweep::row`] (inlined here) take four or eight cells at a time.
+struct TileSweep<'a> {
+    grid: &'a Grid,
+    top: f64,
+    /// The tile's first cell, `(i, j)`.
+    corner: (usize, usize),
+    /// The tile's segments, in program order.
+    bin: &'a [u32],
+    sweeps: &'a [Sweep],
+    segs: &'a [Segment],
+}
+
+impl pulp::WithSimd for TileSweep<'_> {
+    /// The tile's cells, the cells swept, and the rapids that lowered one.
+    type Output = (Vec<f64>, u64, Vec<usize>);
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> Self::Output {
+        let Self {
+            grid,
+            top,
+            corner: (ci0, cj0),
+            bin,
+            sweeps,
+            segs,
+        } = self;
+        let w = TILE.min(grid.nx - ci0);
+        let h = TILE.min(grid.ny - cj0);
+        let mut cells = vec![top; w * h];
+        let mut swept = 0u64;
+        let mut rapid = vec![];
+        let x_first = grid.x0 + (ci0 as f64 + 0.5) * grid.pitch;
+        for &k in bin {
+            let sw = &sweeps[k as usize];
+            let is_rapid = segs[k as usize].kind == SegmentKind::Rapid;
+            let mut lowered = false;
+            for j in 0..h {
+                let y = grid.y0 + ((cj0 + j) as f64 + 0.5) * grid.pitch;
+                let Some((lo, hi)) = sw.row_span(y) else { continue };
+                // cells whose centre may lie in [lo, hi]
+                let a = ((lo - x_first) / grid.pitch).ceil().max(0.0);
+                let b = ((hi - x_first) / grid.pitch).floor().min(w as f64 - 1.0);
+                if a > b {
+                    continue;
+                }
+                let (a, b) = (a as usize, b as usize);
+                let row = &mut cells[j * w + a..=j * w + b];
+                swept += row.len() as u64;
+                // in chunks: skip those where nothing stands above the lowest the segment can reach
+                for (c, chunk) in row.chunks_mut(CHUNK).enumerate() {
+                    let xa = x_first + (a + c * CHUNK) as f64 * grid.pitch;
+                    let xb = xa + (chunk.len() - 1) as f64 * grid.pitch;
+                    let floor = sw.floor(xa, xb, y);
+                    if chunk.iter().all(|v| *v <= floor) {
+                        continue;
+                    }
+                    let (_, low) = sw.row(y, xa, grid.pitch, chunk);
+                    lowered |= low;
+                }
+            }
+            if lowered && is_rapid {
+                rapid.push(k as usize);
+            }
+        }
+        (cells, swept, rapid)
+    }
 }
 
 #[cfg(test)]

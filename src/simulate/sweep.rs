@@ -99,7 +99,7 @@ impl Sweep {
 
     /// A lower bound of the sweep over the cells of row `y` from `x_lo` to `x_hi`: the lowest tip plus the
     /// profile at their distance from the segment's bounding box (`+∞` beyond the radius).
-    #[inline]
+    #[inline(always)]
     pub fn floor(&self, x_lo: f64, x_hi: f64, y: f64) -> f64 {
         let (bx, by) = (self.ax + self.dx, self.ay + self.dy);
         let dy = (self.ay.min(by) - y).max(y - self.ay.max(by)).max(0.0);
@@ -125,6 +125,7 @@ impl Sweep {
 
     /// The x interval of the footprint (points within the bit's radius of the segment) on the line at `y`,
     /// widened by a hair so that points on its rim are inside; None when the line misses it.
+    #[inline(always)]
     pub fn row_span(&self, y: f64) -> Option<(f64, f64)> {
         let (r, r2) = (self.r, self.r2);
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -180,7 +181,9 @@ impl Sweep {
 
     /// `row[i] = min(row[i], sweep at (x0 + i·pitch, y))` for every cell of a row; returns the number of cells
     /// the footprint covers and whether any cell was lowered.
+    #[inline(always)]
     pub fn row(&self, y: f64, x0: f64, pitch: f64, row: &mut [f64]) -> (usize, bool) {
+        assert!(i32::try_from(row.len()).is_ok(), "a row of {} cells", row.len());
         let ey = y - self.ay;
         let ex0 = x0 - self.ax;
         let (dx, dy, dz, az, r, r2) = (self.dx, self.dy, self.dz, self.az, self.r, self.r2);
@@ -192,9 +195,11 @@ impl Sweep {
         let mut hits = 0;
         let mut lowered = false;
         match self.bit {
+            // (selects and non-short-circuit `&`, with the column counted in `i32`, so that the loops
+            // compile to vector instructions)
             Shape::Ball { .. } => {
-                for (i, cell) in row.iter_mut().enumerate() {
-                    let ex = ex0 + i as f64 * pitch;
+                for (i, cell) in (0i32..).zip(row.iter_mut()) {
+                    let ex = ex0 + f64::from(i) * pitch;
                     let ed = ex * dx + eyd;
                     let tp = ed * inv_l2;
                     let rp2 = r2 - (ex * ex + ey2 - ed * tp);
@@ -203,29 +208,27 @@ impl Sweep {
                     let (fx, fy) = (ex - t * dx, ey - t * dy);
                     let s = r2 - (fx * fx + fy * fy);
                     let z = az + t * dz + r - s.max(0.0).sqrt();
-                    let inside = rp2 >= -rim && s >= -rim;
+                    let inside = (rp2 >= -rim) & (s >= -rim);
+                    let c = *cell;
                     hits += inside as usize;
-                    lowered |= inside && z < *cell - LOWERED_MM;
-                    if inside && z < *cell {
-                        *cell = z;
-                    }
+                    lowered |= inside & (z < c - LOWERED_MM);
+                    *cell = if inside & (z < c) { z } else { c };
                 }
             }
             Shape::Flat { .. } => {
-                for (i, cell) in row.iter_mut().enumerate() {
-                    let ex = ex0 + i as f64 * pitch;
+                for (i, cell) in (0i32..).zip(row.iter_mut()) {
+                    let ex = ex0 + f64::from(i) * pitch;
                     let ed = ex * dx + eyd;
                     let tp = ed * inv_l2;
                     let rp2 = r2 - (ex * ex + ey2 - ed * tp);
                     let w = rp2.max(0.0).sqrt() * inv_l;
                     let t = (tp - w).max(0.0);
-                    let inside = rp2 >= -rim && t <= (tp + w).min(1.0);
+                    let inside = (rp2 >= -rim) & (t <= (tp + w).min(1.0));
                     let z = az + t * dz;
+                    let c = *cell;
                     hits += inside as usize;
-                    lowered |= inside && z < *cell - LOWERED_MM;
-                    if inside && z < *cell {
-                        *cell = z;
-                    }
+                    lowered |= inside & (z < c - LOWERED_MM);
+                    *cell = if inside & (z < c) { z } else { c };
                 }
             }
             Shape::Bull { .. } => {
