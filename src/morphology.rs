@@ -29,7 +29,7 @@ const LANES: usize = 16;
 /// row of its footprint, `−prof(√(dx² + dy²))` for consecutive `dx`). `src` holds at least
 /// `out.len() + kernel.len() − 1` samples.
 ///
-/// Outputs are taken [`LANES`] at a time and held in registers across the whole kernel, so each step is one
+/// Outputs are taken sixteen at a time and held in registers across the whole kernel, so each step is one
 /// load of `src`, an add and a `max` (a select, which compiles to packed `max` instructions); the loop that
 /// swept all of `out` once per kernel entry also loaded and stored `out` at every step, and that store was
 /// its bound. `max` is exact, so the order in which the entries are taken does not change a bit of the result.
