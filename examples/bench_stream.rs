@@ -1,7 +1,9 @@
 //! Streaming throughput against the virtual GRBL 1.1 controller over a real pseudo-terminal (the README's
 //! performance table): 10,000 lines at 115200 baud as a share of the link's byte rate (baud/10 bytes/s,
-//! 8N1), and short lines by character counting against send-and-wait over the same link. Motion is
-//! simulated 10⁴× faster than real time, so the link, not the controller, is the bottleneck.
+//! 8N1), and short lines by character counting against send-and-wait over the same link, with motion
+//! simulated 10⁴× faster than real time, so the link, not the controller, is the bottleneck; then a
+//! controller in real time, slower than the link, and how full its status reports (`Bf`, polled at 5 Hz)
+//! show its receive buffer while the streamer holds lines back.
 //!
 //! ```sh
 //! cargo run --release --example bench_stream            # both measurements, once
@@ -9,7 +11,8 @@
 //! ```
 //!
 //! These are wall-clock figures and move with the machine's load (printed first); the tests in
-//! `tests/stream_emulator.rs` assert the behaviour behind them instead (bytes in flight, no idle wait).
+//! `tests/stream_emulator.rs` and `tests/stream_wire.rs` assert the behaviour behind them instead (bytes in
+//! flight, no idle wait, the buffer filled on the wire).
 
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
@@ -29,9 +32,13 @@ fn program(dir: &Path, name: &str, text: &str) -> Program {
 }
 
 fn emulator() -> Emulator {
+    emulator_at(1e4)
+}
+
+fn emulator_at(time_scale: f64) -> Emulator {
     Emulator::start(EmulatorConfig {
         baud: BAUD,
-        time_scale: 1e4,
+        time_scale,
         settings: vec![(10, 3.0)],
         ..EmulatorConfig::default()
     })
@@ -42,12 +49,17 @@ fn emulator() -> Emulator {
 /// written to the last answer).
 fn stream(emu: &Emulator, prog: &Program, journal: &Path) -> Stats {
     let mut link = SerialLink::open(&emu.port_path().expect("port up"), BAUD).unwrap();
+    stream_on(emu, &mut link, prog, journal)
+}
+
+/// [`stream`] over any link.
+fn stream_on(emu: &Emulator, link: &mut dyn Link, prog: &Program, journal: &Path) -> Stats {
     let cfg = Config {
         spindle_dwell_s: 0.1,
         ..Config::default()
     };
     match session::run(
-        &mut link,
+        link,
         prog,
         &cfg,
         journal,
@@ -136,6 +148,61 @@ fn short_lines(dir: &Path, run: usize) {
     );
 }
 
+/// A link that reads the receive-buffer fill off every status report it passes on (`Bf:<blocks>,<bytes
+/// free>` of GRBL's 128-byte buffer).
+struct BfTap {
+    inner: SerialLink,
+    pending: Vec<u8>,
+    reports: usize,
+    max_used: usize,
+}
+
+impl Link for BfTap {
+    fn write_all(&mut self, bytes: &[u8]) -> std::io::Result<()> {
+        self.inner.write_all(bytes)
+    }
+    fn read(&mut self, buf: &mut [u8], timeout: Duration) -> std::io::Result<usize> {
+        let n = self.inner.read(buf, timeout)?;
+        self.pending.extend_from_slice(&buf[..n]);
+        while let Some(i) = self.pending.iter().position(|&b| b == b'\n') {
+            let line: Vec<u8> = self.pending.drain(..=i).collect();
+            let text = String::from_utf8_lossy(&line);
+            let free = text.split(['|', '>']).find_map(|f| f.strip_prefix("Bf:"));
+            if let Some(free) = free.and_then(|bf| bf.split(',').nth(1)?.trim().parse::<usize>().ok()) {
+                self.reports += 1;
+                self.max_used = self.max_used.max(128usize.saturating_sub(free));
+            }
+        }
+        Ok(n)
+    }
+    fn name(&self) -> &str {
+        self.inner.name()
+    }
+}
+
+/// 100 moves of 1 mm at 1200 mm/min in real time (5 s): the planner fills, then the receive buffer.
+fn slow_controller(dir: &Path, run: usize) {
+    let mut text = String::from("G91\nG1\nF1200\n");
+    for i in 0..100 {
+        text += if i % 2 == 0 { "X1\n" } else { "X-1\n" };
+    }
+    let prog = program(dir, &format!("slow{run}.nc"), &text);
+    let emu = emulator_at(1.0);
+    let mut tap = BfTap {
+        inner: SerialLink::open(&emu.port_path().expect("port up"), BAUD).unwrap(),
+        pending: Vec::new(),
+        reports: 0,
+        max_used: 0,
+    };
+    let stats = stream_on(&emu, &mut tap, &prog, &dir.join(format!("slow{run}.journal")));
+    let l_max = prog.sendable().map(|l| l.wire_text(true).len() + 1).max().unwrap_or(0);
+    println!(
+        "slow controller (103 lines of at most {l_max} bytes, real time): at most {} bytes in flight; the \
+         fullest receive buffer a status report showed: {} of 128 bytes, over {} reports",
+        stats.max_in_flight, tap.max_used, tap.reports
+    );
+}
+
 fn main() {
     let repeat: usize = std::env::args().nth(1).map_or(1, |a| a.parse().expect("repeat count"));
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
@@ -148,5 +215,6 @@ fn main() {
     for run in 0..repeat {
         ten_thousand_lines(dir.path(), run);
         short_lines(dir.path(), run);
+        slow_controller(dir.path(), run);
     }
 }

@@ -319,10 +319,12 @@ fn character_counting_keeps_many_short_lines_in_flight() {
 }
 
 /// A controller slower than the link: the planner fills (15 blocks), then its receive buffer, and the
-/// streamer has to hold lines back. The buffer is full and never overflows: while the planner is full the
-/// link is quiet, the parser holds one line waiting for a block, and the streamer waits only when the next
-/// line does not fit — so the buffer holds at least `128 − 2L` bytes (L the longest line with its newline),
-/// and what the controller reports in `Bf` never exceeds what is in flight.
+/// streamer has to hold lines back. The buffer fills and never overflows: while the planner is full no
+/// `ok` comes back, and the streamer writes until the next line does not fit, so the bytes in flight on the
+/// wire reach more than `127 − L` (L the longest line with its newline); what the controller reports in
+/// `Bf` never exceeds what is in flight (checked at every report by `replay`). How full a status report
+/// catches the buffer depends on when the 5 Hz polls land: that figure is printed here and measured by
+/// `examples/bench_stream.rs`, not asserted.
 #[test]
 fn a_slow_controller_fills_its_receive_buffer_without_overflow() {
     let dir = tempfile::tempdir().unwrap();
@@ -342,19 +344,19 @@ fn a_slow_controller_fills_its_receive_buffer_without_overflow() {
     let w = replay(&calls, &expected);
     let l_max = expected.iter().map(|l| l.len() + 1).max().unwrap();
     println!(
-        "slow controller: at most {} bytes in flight, fullest receive buffer reported {} bytes over {} reports \
-         (bound {})",
+        "slow controller: at most {} bytes in flight (bound {}), fullest receive buffer reported {} bytes over \
+         {} reports",
         w.max_in_flight,
+        RX_USABLE + 1 - l_max,
         w.max_rx_used,
-        w.status_reports,
-        RX_BUFFER - 2 * l_max
+        w.status_reports
     );
     assert_eq!(w.lines, expected);
     assert_eq!(w.oks, expected.len());
     assert!(
-        w.max_rx_used >= RX_BUFFER - 2 * l_max,
-        "the buffer never filled: at most {} bytes reported",
-        w.max_rx_used
+        w.max_in_flight + l_max > RX_USABLE,
+        "the buffer never filled: at most {} bytes in flight, lines of up to {l_max} bytes",
+        w.max_in_flight
     );
     assert_eq!(log.executed.len(), 100, "every move ran");
 }
