@@ -20,6 +20,7 @@ use std::time::{Duration, Instant};
 
 use brdfmill::stream::emulator::{Emulator, EmulatorConfig};
 use brdfmill::stream::program::Program;
+use brdfmill::stream::protocol::{parse_response, Response, Status, RX_BUFFER_BYTES};
 use brdfmill::stream::serial::{Link, SerialLink};
 use brdfmill::stream::session::{self, Config, Mode, Outcome, Silent, Stats};
 
@@ -149,7 +150,7 @@ fn short_lines(dir: &Path, run: usize) {
 }
 
 /// A link that reads the receive-buffer fill off every status report it passes on (`Bf:<blocks>,<bytes
-/// free>` of GRBL's 128-byte buffer).
+/// free>` of GRBL's 128-byte buffer), with the streamer's own parser.
 struct BfTap {
     inner: SerialLink,
     pending: Vec<u8>,
@@ -166,11 +167,12 @@ impl Link for BfTap {
         self.pending.extend_from_slice(&buf[..n]);
         while let Some(i) = self.pending.iter().position(|&b| b == b'\n') {
             let line: Vec<u8> = self.pending.drain(..=i).collect();
-            let text = String::from_utf8_lossy(&line);
-            let free = text.split(['|', '>']).find_map(|f| f.strip_prefix("Bf:"));
-            if let Some(free) = free.and_then(|bf| bf.split(',').nth(1)?.trim().parse::<usize>().ok()) {
+            if let Response::Status(Status {
+                rx_free: Some(free), ..
+            }) = parse_response(String::from_utf8_lossy(&line).trim())
+            {
                 self.reports += 1;
-                self.max_used = self.max_used.max(128usize.saturating_sub(free));
+                self.max_used = self.max_used.max(RX_BUFFER_BYTES.saturating_sub(usize::from(free)));
             }
         }
         Ok(n)
@@ -198,7 +200,7 @@ fn slow_controller(dir: &Path, run: usize) {
     let l_max = prog.sendable().map(|l| l.wire_text(true).len() + 1).max().unwrap_or(0);
     println!(
         "slow controller (103 lines of at most {l_max} bytes, real time): at most {} bytes in flight; the \
-         fullest receive buffer a status report showed: {} of 128 bytes, over {} reports",
+         fullest receive buffer a status report showed: {} of {RX_BUFFER_BYTES} bytes, over {} reports",
         stats.max_in_flight, tap.max_used, tap.reports
     );
 }

@@ -128,18 +128,13 @@ impl<'a> DropCutter<'a> {
     /// over the samples with `|u − x|² ≤ r²`, row by row, each row's run of columns taken eight at a time
     /// with the widest vector instructions this CPU has (`pulp`).
     pub fn point(&self, x: f64, y: f64) -> f64 {
-        match self.cutter {
-            Shape::Ball { diameter_mm } => {
-                let r = diameter_mm / 2.0;
-                // `Shape::profile_sq` of a ball, written out so that the loop needs no match
-                let prof = move |rho2: f64| r - (r * r - rho2).max(0.0).sqrt();
-                pulp::Arch::new().dispatch(Point { dc: self, x, y, prof })
-            }
-            bit => {
-                let prof = move |rho2: f64| bit.profile_sq(rho2);
-                pulp::Arch::new().dispatch(Point { dc: self, x, y, prof })
-            }
-        }
+        let bit = self.cutter;
+        pulp::Arch::new().dispatch(Point {
+            dc: self,
+            x,
+            y,
+            prof: move |rho2: f64| bit.profile_sq(rho2),
+        })
     }
 
     /// How far a cutter with its tip at `(x, y, z)` dips below the design (mm, ≤ 0 means no gouge).
