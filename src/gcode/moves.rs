@@ -111,38 +111,95 @@ impl Arc {
         }
     }
 
+    /// The start angle and the signed angular travel (rad, negative clockwise in the plane's axes) from
+    /// `from`, as GRBL's `mc_arc` turns it: `atan2` of the radius vectors' cross and dot products, moved by a
+    /// full turn when it points the wrong way or lies within [`ARC_ANGULAR_TRAVEL_EPSILON`] of zero — so an
+    /// arc whose end is its start, to rounding, is a full circle.
+    #[must_use]
+    pub fn sweep(&self, from: P3) -> (f64, f64) {
+        let (a, b, _) = self.plane.axes();
+        let (u0, v0) = (from[a] - self.center[a], from[b] - self.center[b]);
+        let (u1, v1) = (self.to[a] - self.center[a], self.to[b] - self.center[b]);
+        let mut travel = (u0 * v1 - v0 * u1).atan2(u0 * u1 + v0 * v1);
+        if self.cw {
+            if travel >= -ARC_ANGULAR_TRAVEL_EPSILON {
+                travel -= std::f64::consts::TAU;
+            }
+        } else if travel <= ARC_ANGULAR_TRAVEL_EPSILON {
+            travel += std::f64::consts::TAU;
+        }
+        (v0.atan2(u0), travel)
+    }
+
+    /// The radius at `from`, mm (the one a controller draws the arc with).
+    #[must_use]
+    pub fn radius(&self, from: P3) -> f64 {
+        let (a, b, _) = self.plane.axes();
+        (from[a] - self.center[a]).hypot(from[b] - self.center[b])
+    }
+
+    /// The helical length from `from`, mm: `√((r·θ)² + Δn²)`.
+    #[must_use]
+    pub fn length_mm(&self, from: P3) -> f64 {
+        let n = self.plane.axes().2;
+        (self.radius(from) * self.sweep(from).1).hypot(self.to[n] - from[n])
+    }
+
+    /// The point a fraction `t` of the angular travel from `from` (the normal coordinate moving linearly);
+    /// exactly `to` at `t = 1`.
+    #[must_use]
+    pub fn point_at(&self, from: P3, t: f64) -> P3 {
+        if t >= 1.0 {
+            return self.to;
+        }
+        let (a, b, n) = self.plane.axes();
+        let (t0, travel) = self.sweep(from);
+        let r = self.radius(from);
+        let ang = t0 + travel * t;
+        let mut p = [0.0; 3];
+        p[a] = self.center[a] + r * ang.cos();
+        p[b] = self.center[b] + r * ang.sin();
+        p[n] = from[n] + (self.to[n] - from[n]) * t;
+        p
+    }
+
+    /// Where `p` lies along the arc from `from`: the fraction of the angular travel at `p`'s angle and the
+    /// arc's point there (`None` outside the travel). The caller judges the distance from `p` to it.
+    #[must_use]
+    pub fn project(&self, from: P3, p: P3) -> Option<(f64, P3)> {
+        let (a, b, _) = self.plane.axes();
+        let (t0, travel) = self.sweep(from);
+        let ang = (p[b] - self.center[b]).atan2(p[a] - self.center[a]);
+        // the angle from the start in the direction of travel, in [0, 2π)
+        let mut d = (ang - t0).rem_euclid(std::f64::consts::TAU);
+        if travel < 0.0 {
+            d = (std::f64::consts::TAU - d).rem_euclid(std::f64::consts::TAU);
+        }
+        let t = d / travel.abs();
+        (t <= 1.0).then(|| (t, self.point_at(from, t)))
+    }
+
     /// Points along the arc from `from`, chords at most `tol_mm` from it, ending exactly at `to`. The radius
     /// is that of `from` (as a controller draws it); the helical coordinate (normal to the plane) moves
     /// linearly.
     pub fn points(&self, from: P3, tol_mm: f64) -> Vec<P3> {
-        let (a, b, n) = self.plane.axes();
-        let (c0, c1) = (self.center[a], self.center[b]);
-        let (u0, v0) = (from[a] - c0, from[b] - c1);
-        let (u1, v1) = (self.to[a] - c0, self.to[b] - c1);
-        let r = u0.hypot(v0);
-        let (t0, mut t1) = (v0.atan2(u0), v1.atan2(u1));
-        if self.cw {
-            while t1 >= t0 {
-                t1 -= std::f64::consts::TAU;
-            }
-        } else {
-            while t1 <= t0 {
-                t1 += std::f64::consts::TAU;
-            }
-        }
+        let r = self.radius(from);
+        let (_, travel) = self.sweep(from);
         // chord of angle φ misses the arc by r(1 − cos(φ/2))
         let step = if r > tol_mm && tol_mm > 0.0 {
             2.0 * (1.0 - tol_mm / r).acos()
         } else {
             std::f64::consts::FRAC_PI_4
         };
-        let k = ((t1 - t0).abs() / step.max(1e-6)).ceil().clamp(1.0, 1e5) as usize;
+        let k = (travel.abs() / step.max(1e-6)).ceil().clamp(1.0, 1e5) as usize;
+        let (a, b, n) = self.plane.axes();
+        let (t0, _) = self.sweep(from);
         let mut out = Vec::with_capacity(k);
         for i in 1..k {
-            let t = t0 + (t1 - t0) * i as f64 / k as f64;
+            let t = t0 + travel * i as f64 / k as f64;
             let mut p = [0.0; 3];
-            p[a] = c0 + r * t.cos();
-            p[b] = c1 + r * t.sin();
+            p[a] = self.center[a] + r * t.cos();
+            p[b] = self.center[b] + r * t.sin();
             p[n] = from[n] + (self.to[n] - from[n]) * i as f64 / k as f64;
             out.push(p);
         }
@@ -150,6 +207,9 @@ impl Arc {
         out
     }
 }
+
+/// GRBL's `ARC_ANGULAR_TRAVEL_EPSILON` (rad): an arc turning less than this is taken as a full circle.
+pub const ARC_ANGULAR_TRAVEL_EPSILON: f64 = 5e-7;
 
 /// Chord tolerance at which [`expand_arcs`] replaces arcs, mm (0.1 µm).
 pub const CHORD_TOL_MM: f64 = 1e-4;
@@ -248,4 +308,46 @@ pub fn bounds(moves: &[Move], start: P3) -> (P3, P3) {
         }
     }
     (lo, hi)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI, TAU};
+
+    fn quarter(cw: bool) -> Arc {
+        Arc {
+            to: [0.0, 1.0, 1.0],
+            center: [0.0; 3],
+            plane: Plane::Xy,
+            cw,
+            feed_mm_min: 100.0,
+        }
+    }
+
+    #[test]
+    fn sweep_length_and_projection_follow_the_circle() {
+        let from = [1.0, 0.0, 0.0];
+        let (t0, ccw) = quarter(false).sweep(from);
+        assert!(t0.abs() < 1e-15 && (ccw - FRAC_PI_2).abs() < 1e-12);
+        let (_, cw) = quarter(true).sweep(from);
+        assert!((cw + 3.0 * FRAC_PI_2).abs() < 1e-12, "the long way round: {cw}");
+        // a helix: √((r·θ)² + Δz²)
+        assert!((quarter(false).length_mm(from) - FRAC_PI_2.hypot(1.0)).abs() < 1e-12);
+        // the point at 45° is halfway along the counter-clockwise quarter, and Z has risen halfway
+        let p = [FRAC_PI_4.cos(), FRAC_PI_4.sin(), 0.3];
+        let (t, q) = quarter(false).project(from, p).unwrap();
+        assert!((t - 0.5).abs() < 1e-12 && (q[2] - 0.5).abs() < 1e-12, "{t} {q:?}");
+        // clockwise the arc runs through the other three quarters: 45° is not on it, 225° is
+        assert!(quarter(true).project(from, p).is_none());
+        let (t, _) = quarter(true).project(from, [-p[0], -p[1], 0.0]).unwrap();
+        assert!((t - (3.0 * PI / 4.0) / (3.0 * FRAC_PI_2)).abs() < 1e-12, "{t}");
+        // an arc ending where it starts is a full turn, as GRBL draws it
+        let full = Arc {
+            to: from,
+            ..quarter(false)
+        };
+        assert!((full.sweep(from).1 - TAU).abs() < 1e-12);
+        assert!(full.point_at(from, 0.5)[0] + 1.0 < 1e-12);
+    }
 }

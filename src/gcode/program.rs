@@ -122,6 +122,28 @@ pub struct Line {
 }
 
 impl Line {
+    /// GRBL may run this line's motion, in part or whole, before it answers it: an arc (`mc_arc` plans it
+    /// chord by chord and the `ok` comes after the last) or a move in a block with `M0`, `M1`, `M2` or
+    /// `M30` (the program flow waits for the motion to finish before the `ok`). So at a stop the oldest
+    /// unanswered line may have run when it is one of these.
+    #[must_use]
+    pub fn answered_after_its_motion(&self) -> bool {
+        let arc = matches!(self.motion, Some(MotionMode::ArcCw | MotionMode::ArcCcw));
+        let flow = words(&self.block).is_ok_and(|ws| {
+            ws.iter()
+                .any(|w| w.letter == 'M' && matches!(w.value as i64, 0 | 1 | 2 | 30))
+        });
+        self.kind == LineKind::Gcode && self.moves && (arc || flow)
+    }
+
+    /// The line holds `M0`, GRBL's program pause: once its motion has run the controller holds (`Hold:0`)
+    /// until a cycle start, and answers it after that.
+    #[must_use]
+    pub fn pauses(&self) -> bool {
+        self.kind == LineKind::Gcode
+            && words(&self.block).is_ok_and(|ws| ws.iter().any(|w| w.letter == 'M' && w.value == 0.0))
+    }
+
     /// GRBL answers this line only once the planner has emptied (`protocol_buffer_synchronize`): a dwell,
     /// a program stop or end, a spindle state change or a speed change while it runs, a coolant change.
     /// Its `ok`, received before any reset, therefore proves that every line planned before it executed.

@@ -32,6 +32,9 @@ pub struct Controller {
     pub(super) state: State,
     /// Waiting for a soft reset after a critical alarm.
     pub(super) critical: bool,
+    /// A soft limit came during a cycle: the machine is coming to a controlled stop (a feed hold), after
+    /// which `ALARM:2` locks the controller (GRBL's `limits_soft_check`).
+    pub(super) soft_limit_pending: bool,
     /// A feed hold is in force (`Hold:1` while decelerating, `Hold:0` once stopped).
     pub(super) hold: bool,
     /// Simulated seconds of deceleration left in the current feed hold (0: the hold is complete).
@@ -104,6 +107,7 @@ impl Controller {
             settings,
             state: State::Idle,
             critical: false,
+            soft_limit_pending: false,
             hold: false,
             decel_left_s: 0.0,
             decel_total_s: 0.0,
@@ -308,18 +312,27 @@ impl Controller {
     /// Ctrl-X: stop, flush the receive buffer and planner, reset the parser, print the banner. As GRBL's
     /// `mc_reset`, the reset raises `ALARM:3` only while motion is executing — a cycle, or a hold still
     /// decelerating; after a completed hold (`Hold:0`) it raises none and the controller comes back Idle.
-    /// The reset that ends a critical alarm is answered with one stray `ok` before the banner, as the
-    /// 1.1h PC build was seen to do.
+    /// The line GRBL was executing when the reset came — waiting for planner space, for the planner to empty,
+    /// in a dwell or a probe, or the line a critical alarm stopped (the 1.1h PC build was seen to do this) —
+    /// returns from the abort and is answered `ok` after any `ALARM:3`, before the banner.
     pub(super) fn soft_reset(&mut self) {
         let executing = self.state == State::Run && (!self.hold || self.decel_left_s > 0.0);
         let moving = executing && !self.planner.is_empty() && !self.critical;
-        if self.critical {
+        // a line GRBL was still executing (blocked waiting for planner space, the planner to empty, a dwell
+        // or a probe, or locked in a critical alarm) returns from the abort and is answered `ok`
+        let answered = self.critical || self.soft_limit_pending || self.waiting.is_some();
+        if moving {
+            self.say("ALARM:3");
+            self.log.events.push("ALARM:3 (reset while in motion)".into());
+        }
+        if answered {
             self.say("ok");
         }
         self.flush_motion();
         self.rx.clear();
         self.reader.clear();
         self.critical = false;
+        self.soft_limit_pending = false;
         self.modal = Modal::default();
         // GRBL's gc_init: G54 selected, the G92 and tool length offsets cleared (G54–G59, G28, G30 are kept)
         self.coord_select = 0;
@@ -332,8 +345,6 @@ impl Controller {
         self.probing = None;
         self.probe_result = ([0.0; 3], false);
         if moving {
-            self.say("ALARM:3");
-            self.log.events.push("ALARM:3 (reset while in motion)".into());
             self.state = State::Alarm;
         } else if self.state != State::Alarm {
             self.state = State::Idle;
@@ -343,7 +354,29 @@ impl Controller {
         self.banner();
     }
 
-    /// Stop at once and lock with `ALARM:code` until a soft reset (soft-limit behaviour).
+    /// A target beyond the soft limits (GRBL's `limits_soft_check`): during a cycle a feed hold first brings
+    /// the machine to a controlled stop along its path (`Hold:1` meanwhile, the position kept), then the
+    /// reset and `ALARM:2`; otherwise `ALARM:2` at once. The line concerned is answered only by the `ok` that
+    /// follows the reset.
+    pub(super) fn soft_limit(&mut self) {
+        self.waiting = None;
+        if self.state == State::Run && !self.planner.is_empty() {
+            self.feed_hold();
+            self.soft_limit_pending = true;
+            self.log
+                .events
+                .push("soft limit: controlled stop before ALARM:2".into());
+            if self.decel_left_s <= 0.0 {
+                self.soft_limit_pending = false;
+                self.alarm(2);
+            }
+        } else {
+            self.alarm(2);
+        }
+    }
+
+    /// Stop at once and lock with `ALARM:code` until a soft reset (a critical alarm: a hard limit stops the
+    /// steppers where they are; a soft limit's controlled stop has already happened).
     pub(super) fn alarm(&mut self, code: u16) {
         // Motion stops here; the planner is only cleared by the reset that ends the lock, so status
         // reports until then still name the block that was executing (`Ln`), as in GRBL.
@@ -371,9 +404,12 @@ impl Controller {
     }
 
     /// GRBL's main loop: finish what the last line waits for, then read lines from the receive buffer.
+    /// Nothing is parsed or planned while a feed hold or jog cancel is in force: GRBL's
+    /// `protocol_exec_rt_suspend` keeps the main program waiting until the hold is resumed or reset (lines
+    /// sent meanwhile wait in the receive buffer, unanswered).
     pub(super) fn main_loop(&mut self) {
         loop {
-            if self.critical {
+            if self.critical || self.hold {
                 return;
             }
             match self.serve_waiting() {
@@ -408,6 +444,11 @@ impl Controller {
         match self.fire_fault(&text) {
             Some(FaultKind::Error(code)) => {
                 self.say(&format!("error:{code}"));
+                return;
+            }
+            // ALARM:2 as the firmware raises it, after a controlled stop; any other code at once
+            Some(FaultKind::Alarm(2)) => {
+                self.soft_limit();
                 return;
             }
             Some(FaultKind::Alarm(code)) => {

@@ -1,5 +1,5 @@
-//! Injected faults: an `error:N` instead of running a line, an alarm that stops motion at once, or a
-//! dropped link after the line. Each fires once, on the first line that matches it (see the module
+//! Injected faults: an `error:N` instead of running a line, an alarm (`ALARM:2` after a soft limit's
+//! controlled stop, any other code at once), a silence, or a dropped link after the line. Each fires once, on the first line that matches it (see the module
 //! documentation of [`emulator`](super) for what each does to the controller).
 
 use super::controller::Controller;
@@ -28,7 +28,8 @@ pub enum FaultAt {
 pub enum FaultKind {
     /// Answer `error:code` instead of running the line.
     Error(u16),
-    /// Stop and raise `ALARM:code` (soft-limit behaviour).
+    /// Raise `ALARM:code` as a critical alarm: code 2 as a soft limit does (a controlled stop first, the
+    /// position kept), any other at once.
     Alarm(u16),
     /// Run the line, then drop the link.
     Disconnect,

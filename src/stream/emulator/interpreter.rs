@@ -11,7 +11,8 @@ use std::collections::HashSet;
 
 use super::controller::{Controller, State};
 use super::line_reader::leading_line_number;
-use super::planner::{Block, BlockKind, Moves, Waiting};
+use super::planner::{BlockKind, Moves, Waiting};
+use crate::gcode::moves::{Arc, Plane};
 use crate::stream::program::{self, Distance, Modal, MotionMode, Spindle, Units, MAX_LINE_NUMBER};
 
 /// The modal group of G90.1/G91.1 (GRBL's `MODAL_GROUP_G4`; the other ids here are GRBL's group numbers).
@@ -52,6 +53,8 @@ struct Parsed {
     sync: bool,
     /// M2 / M30.
     program_end: bool,
+    /// M0: a program pause (M1, the optional stop, GRBL ignores).
+    program_pause: bool,
     /// One of G0–G3 (GRBL's `AXIS_COMMAND_MOTION_MODE`).
     axis_command: bool,
     /// M7, which only a build with `ENABLE_M7` accepts.
@@ -217,6 +220,7 @@ impl Parsed {
             0 | 1 | 2 | 30 => {
                 self.group(4)?;
                 self.program_end = matches!(code, 2 | 30);
+                self.program_pause = code == 0;
             }
             3..=5 => {
                 self.group(7)?;
@@ -335,16 +339,6 @@ impl Parsed {
     }
 }
 
-/// The motion a block makes, if any.
-enum Motion {
-    /// No move (no axis word, or a zero-length one).
-    None,
-    /// A block for the planner.
-    Block(Block),
-    /// The target is outside the soft limits: `ALARM:2`.
-    SoftLimit,
-}
-
 impl Controller {
     /// Parse and run one G-code block; `Err(code)` is GRBL's error code.
     pub(super) fn gcode(&mut self, text: &str) -> Result<(), u16> {
@@ -404,28 +398,13 @@ impl Controller {
         let moves = if consumed {
             None
         } else if let Some(NonModal::GoStored(w)) = parsed.non_modal {
-            match self.go_stored(&parsed, stored[w], target, leading_line_number(text).unwrap_or(0)) {
-                Some(mv) => mv,
-                None => {
-                    self.modal = m;
-                    self.alarm(2);
-                    return Ok(());
-                }
-            }
+            self.go_stored(&parsed, stored[w], target, leading_line_number(text).unwrap_or(0))
         } else {
-            match self.motion(&parsed, &m, target, k, text, inverse)? {
-                Motion::None => None,
-                Motion::Block(b) => Some((b, None)),
-                Motion::SoftLimit => {
-                    self.modal = m;
-                    self.alarm(2);
-                    return Ok(());
-                }
-            }
+            self.motion(&parsed, &m, target, k, text, inverse)?
         };
         let end = match (&moves, parsed.non_modal) {
             (_, Some(NonModal::GoStored(w))) => Some(self.stored_target(&parsed, stored[w])),
-            (Some((b, _)), _) => Some(b.to),
+            (Some(blocks), _) => blocks.back().map(|b| b.to),
             (None, _) => None,
         };
         (self.coord, self.g92, self.stored, self.tlo, self.coord_select) = (coord, g92, stored, tlo, select);
@@ -495,29 +474,20 @@ impl Controller {
         home
     }
 
-    /// G28/G30's rapids: to the intermediate point (the axis words, if any) and on to the stored position;
-    /// `None` when one of them leaves the soft limits (`ALARM:2`), `Some(None)` when neither moves.
-    fn go_stored(&mut self, parsed: &Parsed, stored: [f64; 3], via: [f64; 3], line: u32) -> Option<Option<Moves>> {
+    /// G28/G30's rapids: to the intermediate point (the axis words, if any) and on to the stored position
+    /// (`None` when neither moves). Each is checked against the soft limits as it is planned.
+    fn go_stored(&mut self, parsed: &Parsed, stored: [f64; 3], via: [f64; 3], line: u32) -> Option<Moves> {
         let home = self.stored_target(parsed, stored);
-        if self.beyond_soft_limits(via) || self.beyond_soft_limits(home) {
-            return None;
-        }
-        let start = self.parser_pos;
         let first = self.block(BlockKind::Rapid, via, 0.0, line);
-        self.parser_pos = via;
-        let second = self.block(BlockKind::Rapid, home, 0.0, line);
-        self.parser_pos = start;
-        let line = |b: Block| (b.duration_s > 0.0).then_some(b);
-        Some(match (line(first), line(second)) {
-            (Some(a), Some(b)) => Some((a, Some(Box::new(b)))),
-            (Some(a), None) | (None, Some(a)) => Some((a, None)),
-            (None, None) => None,
-        })
+        let second = self.block_from(via, BlockKind::Rapid, home, 0.0, line);
+        let blocks: Moves = [first, second].into_iter().filter(|b| b.duration_s > 0.0).collect();
+        (!blocks.is_empty()).then_some(blocks)
     }
 
-    /// The block's move to `target` (machine mm; `k` converts the block's units to mm), checked. In
-    /// inverse time (`inverse`, G93) the feed is `F` per minute of the block: it takes `1/F` minutes (or
-    /// longer, when an axis' maximum rate limits it).
+    /// The block's move to `target` (machine mm; `k` converts the block's units to mm), checked, as the
+    /// planner blocks it becomes (`None`: it does not move). In inverse time (`inverse`, G93) the feed is
+    /// `F` per minute of the block: it takes `1/F` minutes (or longer, when an axis' maximum rate limits
+    /// it). An arc becomes GRBL's chords ([`Controller::arc_chords`]).
     #[allow(clippy::too_many_arguments)]
     fn motion(
         &mut self,
@@ -527,54 +497,87 @@ impl Controller {
         k: f64,
         text: &str,
         inverse: bool,
-    ) -> Result<Motion, u16> {
+    ) -> Result<Option<Moves>, u16> {
         let probe = matches!(m.motion, MotionMode::Probe { .. });
         if !parsed.has_axis() {
             // GRBL: a G38.x word without axis words is an error (26); any other motion mode just stays
             return if probe && parsed.motion.is_some() {
                 Err(26)
             } else {
-                Ok(Motion::None)
+                Ok(None)
             };
         }
         let feed = m.feed_mm_min.unwrap_or(0.0);
         if m.motion != MotionMode::Rapid && feed <= 0.0 {
             return Err(22);
         }
-        let kind = match m.motion {
-            MotionMode::Rapid => BlockKind::Rapid,
-            MotionMode::Linear | MotionMode::Probe { .. } => BlockKind::Linear,
-            _ => self.arc(parsed, m, target, k, text)?,
+        let arc = match m.motion {
+            MotionMode::ArcCw | MotionMode::ArcCcw => Some(self.arc(parsed, m, target, k)?),
+            _ => None,
         };
         if probe && (0..3).all(|i| (target[i] - self.parser_pos[i]).abs() < 1e-9) {
             return Err(33); // a probe to where the tool already is: invalid target
         }
-        if self.beyond_soft_limits(target) {
-            return Ok(Motion::SoftLimit);
-        }
         let line = leading_line_number(text).unwrap_or(0);
-        let b = if inverse && kind != BlockKind::Rapid {
-            // at 1 mm/min a block takes 60 s per mm (no axis rate limits that), so its length is
-            // duration/60; the feed that takes 1/F minutes over it is length·F
-            let length_mm = self.block(kind, target, 1.0, line).duration_s / 60.0;
-            self.block(kind, target, length_mm * feed, line)
+        let kind = if m.motion == MotionMode::Rapid {
+            BlockKind::Rapid
         } else {
-            self.block(kind, target, feed, line)
+            BlockKind::Linear
         };
-        Ok(if b.duration_s > 0.0 {
-            Motion::Block(b)
+        let feed = if inverse && kind != BlockKind::Rapid {
+            // F is 1/minutes for the whole move: its feed in mm/min is its length · F
+            let length_mm = match &arc {
+                Some(a) => a.length_mm(self.parser_pos),
+                None => (0..3)
+                    .map(|i| (target[i] - self.parser_pos[i]).powi(2))
+                    .sum::<f64>()
+                    .sqrt(),
+            };
+            length_mm * feed
         } else {
-            Motion::None
-        })
+            feed
+        };
+        let blocks: Moves = match arc {
+            Some(a) => self.arc_chords(&a, feed, line),
+            None => [self.block(kind, target, feed, line)].into(),
+        };
+        let blocks: Moves = blocks.into_iter().filter(|b| b.duration_s > 0.0).collect();
+        Ok((!blocks.is_empty()).then_some(blocks))
+    }
+
+    /// GRBL's `mc_arc`: the arc from the parser position as `n` chords whose ends lie on it,
+    /// `n = ⌊|θ·r/2| / √(tol·(2r − tol))⌋` with `tol` = `$12`, each a linear block at `feed_mm_min` (the last
+    /// ends exactly at the arc's end). GRBL rotates the radius vector in single precision with a correction
+    /// every 12 chords; the ends here are exact, within 10⁻⁶ mm of it. `n` is capped at GRBL's 16-bit count.
+    fn arc_chords(&self, arc: &Arc, feed_mm_min: f64, line: u32) -> Moves {
+        let from = self.parser_pos;
+        let (_, travel) = arc.sweep(from);
+        let r = arc.radius(from);
+        let tol = self.setting(12);
+        let per = (tol * (2.0 * r - tol)).sqrt();
+        let count = if per > 0.0 {
+            ((0.5 * travel * r).abs() / per).floor().min(f64::from(u16::MAX)) as usize
+        } else {
+            0
+        };
+        let mut blocks = Moves::with_capacity(count.max(1));
+        let mut at = from;
+        for i in 1..count {
+            let pt = arc.point_at(from, i as f64 / count as f64);
+            blocks.push_back(self.block_from(at, BlockKind::Linear, pt, feed_mm_min, line));
+            at = pt;
+        }
+        blocks.push_back(self.block_from(at, BlockKind::Linear, arc.to, feed_mm_min, line));
+        blocks
     }
 
     /// An arc in the block's plane (offsets `I J` in G17, `K I` in G18, `J K` in G19) from the parser
     /// position to `target`, with GRBL's arc errors: 32 without an in-plane axis word, 35 without an in-plane
     /// offset (one normal to the plane is read and ignored, as GRBL clears all three), 33 when the end radius
     /// differs from the start's by more than 0.005 mm and either 0.5 mm or 0.1% (GRBL 1.1 `gc_execute_line`).
-    fn arc(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], k: f64, _text: &str) -> Result<BlockKind, u16> {
-        let (a, b, n) = crate::gcode::moves::Plane::from_g(m.plane).axes();
-        let axes = [a, b, n];
+    fn arc(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], k: f64) -> Result<Arc, u16> {
+        let plane = Plane::from_g(m.plane);
+        let (a, b, _) = plane.axes();
         let (axis, ijk) = (parsed.axis, parsed.ijk);
         if axis[a].is_none() && axis[b].is_none() {
             return Err(32);
@@ -592,51 +595,76 @@ impl Controller {
         if dr > 0.005 && (dr > 0.5 || dr > 0.001 * r0) {
             return Err(33);
         }
-        Ok(BlockKind::Arc {
-            center: c,
+        let mut center = [0.0; 3];
+        (center[a], center[b]) = (c[0], c[1]);
+        Ok(Arc {
+            to: target,
+            center,
+            plane,
             cw: m.motion == MotionMode::ArcCw,
-            axes,
+            feed_mm_min: m.feed_mm_min.unwrap_or(0.0),
         })
     }
 
     /// What happens to a valid block: in check mode only its `ok`; spindle, coolant, dwell and program
     /// end wait for the planner to empty, then their motion is planned; plain motion waits for planner
     /// space. The parser moves on to `target` at once.
-    fn hand_over(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], block: Option<Moves>) {
+    fn hand_over(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], blocks: Option<Moves>) {
         self.parser_pos = target;
         if self.state == State::Check {
-            self.say("ok");
-            return;
-        }
-        if parsed.sync || parsed.dwell || parsed.program_end {
-            // Spindle, coolant and dwell wait for the planner to empty first (GRBL synchronises them).
-            // Motion in the same block is planned after the synchronised commands.
-            self.waiting = Some(Waiting::Sync {
-                dwell_s: if parsed.dwell { parsed.p.unwrap_or(0.0) } else { 0.0 },
-                then: block,
-            });
-            if parsed.program_end {
-                self.modal = Modal {
-                    units: m.units,
-                    feed_mm_min: m.feed_mm_min,
-                    spindle_rpm: m.spindle_rpm,
-                    motion: MotionMode::Linear,
-                    ..Modal::default()
-                };
+            // no motion is planned in check mode, but soft limits still alarm (GRBL's `mc_line`)
+            if blocks.iter().flatten().any(|b| self.beyond_soft_limits(b.to)) {
+                self.alarm(2);
+            } else {
+                self.say("ok");
             }
             return;
         }
-        match (block, m.motion) {
-            (Some((b, _)), MotionMode::Probe { away, no_error }) => {
-                self.waiting = Some(Waiting::Probe {
-                    block: b,
+        if parsed.program_end {
+            self.modal = Modal {
+                units: m.units,
+                feed_mm_min: m.feed_mm_min,
+                spindle_rpm: m.spindle_rpm,
+                motion: MotionMode::Linear,
+                ..Modal::default()
+            };
+        }
+        // GRBL's order within a block: spindle, coolant and dwell first (each waits for the planner to
+        // empty), then the motion (a probe runs alone), then the program flow — an end or a pause — which
+        // waits for the motion to finish
+        let end = if parsed.program_end {
+            Some(Box::new(Waiting::End))
+        } else if parsed.program_pause {
+            Some(Box::new(Waiting::Pause { held: false }))
+        } else {
+            None
+        };
+        let motion = match (blocks, m.motion) {
+            (Some(mut blocks), MotionMode::Probe { away, no_error }) => {
+                blocks.pop_front().map(|block| Waiting::Probe {
+                    block,
                     away,
                     no_error,
                     started: false,
+                    then: end.clone(),
                 })
             }
-            (Some(b), _) => self.waiting = Some(Waiting::Plan(b)),
-            (None, _) => self.say("ok"),
+            (Some(blocks), _) => Some(Waiting::Plan {
+                blocks,
+                then: end.clone(),
+            }),
+            (None, _) => end.clone().map(|e| *e),
+        };
+        self.waiting = if parsed.sync || parsed.dwell {
+            Some(Waiting::Sync {
+                dwell_s: if parsed.dwell { parsed.p.unwrap_or(0.0) } else { 0.0 },
+                then: motion.map(Box::new),
+            })
+        } else {
+            motion
+        };
+        if self.waiting.is_none() {
+            self.say("ok");
         }
     }
 }

@@ -7,7 +7,8 @@
 //!   (comments and spaces stripped, 79-character limit → `error:11`), the G-code subset below with GRBL's
 //!   error codes, a 15-block planner that executes blocks at their programmed feed in simulated time,
 //!   status reports (`MPos`/`WPos`, `Bf`, `Ln`, `FS`, `WCO`, `Ov`), `$C` check mode, `$$`/`$x=`/`$I`/
-//!   `$G`/`$#`/`$X`/`$H`, soft limits raising `ALARM:2`, and injected faults.
+//!   `$G`/`$#`/`$X`/`$H`, soft limits raising `ALARM:2` (after a controlled stop when in a cycle), and
+//!   injected faults.
 //! - [`Emulator`]: runs a controller on a pseudo-terminal in its own thread, pacing bytes both ways at the
 //!   configured baud (10 bits per byte, 8N1) and running motion `time_scale` times faster than real time.
 //!
@@ -16,13 +17,17 @@
 //! G30/G30.1: see `interpreter`), M0 M1 M2 M30 M3 M4 M5 M7 M8 M9, F S T N P L words. Not modelled
 //! (answered `error:20`, and logged as such): arcs in R form; G61 is accepted as GRBL's only path control mode (G61.1 and G64 answer `error:20`); `$SLP` (answered
 //! `error:3`). G38.2–G38.5 probing is modelled against a touch plate (`probe_plate_z_mm`; see `planner`).
-//! `$J=` jogging is modelled (state `Jog`, jog cancel 0x85, see `system`). Blocks cruise at their feed (no acceleration between them); a feed hold
-//! decelerates at `$120`–`$122` along the planned path.
+//! `$J=` jogging is modelled (state `Jog`, jog cancel 0x85, see `system`). An arc is planned as GRBL's
+//! `mc_arc` chords (`$12`), one planner block each, and answered once its last chord is planned, so a long
+//! arc runs before its `ok`. Blocks cruise at their feed (no acceleration between them); a feed hold
+//! decelerates at `$120`–`$122` along the planned path, and while it is in force (or a jog cancel) nothing
+//! is parsed: lines wait in the receive buffer, unanswered, as in GRBL's suspend loop.
 //!
 //! **Faults** ([`Fault`]) fire once, on the first line carrying line number `N` (or the `k`-th line
-//! received): `error` answers `error:code` instead of running the line; `alarm` stops motion at once and
-//! raises `ALARM:code` the way a soft limit does (position retained, `[MSG:Reset to continue]`, nothing runs
-//! until a soft reset); `disconnect` runs the line and then drops the link — the controller keeps executing
+//! received): `error` answers `error:code` instead of running the line; `alarm` raises `ALARM:code` as a
+//! critical alarm (`[MSG:Reset to continue]`, nothing answered or run until a soft reset) — for code 2 the
+//! way a soft limit does, after a controlled stop with the position retained, for any other code at once;
+//! `disconnect` runs the line and then drops the link — the controller keeps executing
 //! what is already complete in its receive buffer and planner (a board with its own power supply), discards
 //! a partial line, and opens a new pseudo-terminal after `reconnect_delay`.
 //!
@@ -50,6 +55,8 @@ mod status;
 mod system;
 #[cfg(test)]
 mod tests;
+#[cfg(test)]
+mod tests_suspend;
 
 use std::path::PathBuf;
 use std::time::Duration;

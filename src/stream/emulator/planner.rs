@@ -1,25 +1,21 @@
-//! Motion: the blocks the interpreter makes (lines and arcs in G17, G18 or G19, timed at their feed — cruising at it, no
-//! acceleration between blocks — and limited by each axis' maximum rate), a feed hold that decelerates
+//! Motion: the blocks the interpreter makes (straight lines — an arc arrives as GRBL's `mc_arc` chords —
+//! timed at their feed, cruising at it, no acceleration between blocks, and limited by each axis' maximum
+//! rate), soft limits checked as each block is planned (GRBL's `mc_line`), a feed hold that decelerates
 //! along the planned path, GRBL's 15-block planner, the commands that wait for it to empty (spindle,
-//! coolant, dwell, program end), and simulated execution — the machine position moving along
-//! the head block as simulated time advances, each finished or cut piece logged.
+//! coolant, dwell, program end), and simulated execution — the machine position moving along the head block
+//! as simulated time advances, each finished or cut piece logged.
+
+use std::collections::VecDeque;
 
 use super::controller::{Controller, State};
 use super::Piece;
 use crate::stream::protocol::PLANNER_BLOCKS;
 
-/// How a block moves: straight at the rapid rate, straight at its feed, or along an arc in the plane whose
-/// (first, second, normal) axes are `axes` (G17 X Y Z, G18 Z X Y, G19 Y Z X), `center` in the first two,
-/// clockwise seen from the normal's positive end when `cw`, linear along the normal.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// How a block moves: straight at the rapid rate, or straight at its feed (every arc chord is one).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum BlockKind {
     Rapid,
     Linear,
-    Arc {
-        center: [f64; 2],
-        cw: bool,
-        axes: [usize; 3],
-    },
 }
 
 /// A planned motion block, in machine coordinates (mm).
@@ -37,56 +33,29 @@ pub(super) struct Block {
 }
 
 impl Block {
+    /// The point a fraction `t` of the way along the block.
     fn at(&self, t: f64) -> [f64; 3] {
         let t = t.clamp(0.0, 1.0);
-        match self.kind {
-            BlockKind::Arc {
-                center,
-                cw,
-                axes: [a, b, n],
-            } => {
-                if t >= 1.0 {
-                    return self.to;
-                }
-                let (a0, sweep) = arc_sweep(self.from, self.to, center, cw, [a, b]);
-                let r = (self.from[a] - center[0]).hypot(self.from[b] - center[1]);
-                let ang = a0 + sweep * t;
-                let mut p = [0.0; 3];
-                p[a] = center[0] + r * ang.cos();
-                p[b] = center[1] + r * ang.sin();
-                p[n] = self.from[n] + (self.to[n] - self.from[n]) * t;
-                p
-            }
-            _ => std::array::from_fn(|i| self.from[i] + (self.to[i] - self.from[i]) * t),
-        }
+        std::array::from_fn(|i| self.from[i] + (self.to[i] - self.from[i]) * t)
     }
-}
 
-/// Start angle and signed sweep of an arc in the plane axes `[a, b]` (full circle when start = end).
-fn arc_sweep(from: [f64; 3], to: [f64; 3], c: [f64; 2], cw: bool, [a, b]: [usize; 2]) -> (f64, f64) {
-    let a0 = (from[b] - c[1]).atan2(from[a] - c[0]);
-    let a1 = (to[b] - c[1]).atan2(to[a] - c[0]);
-    let mut sweep = a1 - a0;
-    if cw {
-        if sweep >= -1e-9 {
-            sweep -= std::f64::consts::TAU;
-        }
-    } else if sweep <= 1e-9 {
-        sweep += std::f64::consts::TAU;
+    fn length_mm(&self) -> f64 {
+        (0..3).map(|i| (self.to[i] - self.from[i]).powi(2)).sum::<f64>().sqrt()
     }
-    (a0, sweep)
 }
 
 /// What a parsed line waits for before its `ok`.
 #[derive(Debug, Clone)]
 pub(super) enum Waiting {
-    /// A line's motion waiting for planner space.
-    Plan(Moves),
+    /// A line's motion blocks waiting for planner space, one at a time as GRBL's `mc_line` plans them,
+    /// each checked against the soft limits first; then what the line does after its motion, if anything
+    /// (a program end waits for the planner to empty).
+    Plan { blocks: Moves, then: Option<Box<Waiting>> },
     /// A spindle/coolant change or dwell waiting for the planner to empty (GRBL synchronises them), then
     /// the block's own motion, if any.
-    Sync { dwell_s: f64, then: Option<Moves> },
+    Sync { dwell_s: f64, then: Option<Box<Waiting>> },
     /// Dwelling until this simulated time, then the block's motion.
-    Dwell { until_s: f64, then: Option<Moves> },
+    Dwell { until_s: f64, then: Option<Box<Waiting>> },
     /// A G38.x probing move: it waits for the planner to empty, runs alone until the probe's contact
     /// changes (or the move ends), and is answered once the machine has stopped (GRBL's `mc_probe_cycle`).
     Probe {
@@ -94,12 +63,19 @@ pub(super) enum Waiting {
         away: bool,
         no_error: bool,
         started: bool,
+        /// What the line does once the probe has stopped (a program end), if anything.
+        then: Option<Box<Waiting>>,
     },
+    /// M2/M30 after the block's motion: once the planner is empty, `[MSG:Pgm End]` and the `ok`.
+    End,
+    /// M0 after the block's motion: once the planner is empty a feed hold (`Hold:0`) that only a cycle start
+    /// (`~`) ends; the `ok` comes after it (GRBL's `PROGRAM_FLOW_PAUSED`).
+    Pause { held: bool },
 }
 
-/// A line's motion: one planner block, or two (G28/G30 through an intermediate point: the move home
-/// follows the first).
-pub(super) type Moves = (Block, Option<Box<Block>>);
+/// A line's motion, in order: one planner block, two (G28/G30 through an intermediate point), or an arc's
+/// chords.
+pub(super) type Moves = VecDeque<Block>;
 
 /// What serving the waiting line came to.
 pub(super) enum Served {
@@ -112,29 +88,29 @@ pub(super) enum Served {
 }
 
 impl Controller {
-    /// A motion block from the parser position to `to`, timed at its feed (no acceleration) and limited
-    /// by each axis' maximum rate (`$110`–`$112`, mm/min).
+    /// A motion block from the parser position to `to` (see [`Controller::block_from`]).
     pub(super) fn block(&self, kind: BlockKind, to: [f64; 3], feed_mm_min: f64, line: u32) -> Block {
-        let from = self.parser_pos;
-        let d: Vec<f64> = (0..3).map(|i| to[i] - from[i]).collect();
+        self.block_from(self.parser_pos, kind, to, feed_mm_min, line)
+    }
+
+    /// A straight motion block from `from` to `to`, timed at its feed (no acceleration) and limited by each
+    /// axis' maximum rate (`$110`–`$112`, mm/min); a rapid runs at those rates.
+    pub(super) fn block_from(
+        &self,
+        from: [f64; 3],
+        kind: BlockKind,
+        to: [f64; 3],
+        feed_mm_min: f64,
+        line: u32,
+    ) -> Block {
+        let d: [f64; 3] = std::array::from_fn(|i| to[i] - from[i]);
         let axis_limited = (0..3)
             .map(|i| d[i].abs() / (self.setting(110 + i as u16).max(1e-9) / 60.0))
             .fold(0.0, f64::max);
-        let length = match kind {
-            BlockKind::Arc {
-                center,
-                cw,
-                axes: [a, b, n],
-            } => {
-                let (_, sweep) = arc_sweep(from, to, center, cw, [a, b]);
-                let r = (from[a] - center[0]).hypot(from[b] - center[1]);
-                ((r * sweep).powi(2) + d[n].powi(2)).sqrt()
-            }
-            _ => (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt(),
-        };
+        let length = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
         let duration_s = match kind {
             BlockKind::Rapid => axis_limited,
-            _ => (length / (feed_mm_min / 60.0)).max(axis_limited),
+            BlockKind::Linear => (length / (feed_mm_min / 60.0)).max(axis_limited),
         };
         Block {
             line,
@@ -161,6 +137,11 @@ impl Controller {
             self.execute_for(effective);
             if self.planner.is_empty() {
                 self.decel_left_s = 0.0;
+            }
+            if self.soft_limit_pending && self.decel_left_s <= 0.0 {
+                // the controlled stop before a soft limit's reset is complete
+                self.soft_limit_pending = false;
+                self.alarm(2);
             }
         }
         self.run_motion(dt_s);
@@ -191,13 +172,12 @@ impl Controller {
         if b.duration_s <= 0.0 {
             return 0.0;
         }
-        let len: f64 = (0..3).map(|i| (b.to[i] - b.from[i]).powi(2)).sum::<f64>().sqrt();
         let f = if b.kind == BlockKind::Rapid {
             1.0
         } else {
             f64::from(self.feed_override) / 100.0
         };
-        len / b.duration_s * f
+        b.length_mm() / b.duration_s * f
     }
 
     /// Move along the planner's blocks for `dt` simulated seconds at their programmed speed.
@@ -239,15 +219,22 @@ impl Controller {
             return Served::Done;
         };
         match w {
-            Waiting::Plan((b, next)) => {
-                if self.planner_full() {
-                    self.start_cycle();
-                    self.waiting = Some(Waiting::Plan((b, next)));
-                    return Served::Blocked;
+            Waiting::Plan { mut blocks, then } => {
+                while let Some(b) = blocks.front() {
+                    if self.beyond_soft_limits(b.to) {
+                        // the stop, ALARM:2 and, after the user's reset, the line's `ok` follow
+                        self.soft_limit();
+                        return Served::Blocked;
+                    }
+                    if self.planner_full() {
+                        self.start_cycle();
+                        self.waiting = Some(Waiting::Plan { blocks, then });
+                        return Served::Blocked;
+                    }
+                    self.planner.extend(blocks.pop_front());
                 }
-                self.planner.push_back(b);
-                if let Some(n) = next {
-                    self.waiting = Some(Waiting::Plan((*n, None)));
+                if let Some(w) = then {
+                    self.waiting = Some(*w);
                     return Served::Again;
                 }
                 self.say("ok");
@@ -269,15 +256,33 @@ impl Controller {
                 away,
                 no_error,
                 started,
-            } => return self.serve_probe(block, away, no_error, started),
+                then,
+            } => return self.serve_probe(block, away, no_error, started, then),
+            Waiting::End | Waiting::Pause { held: false } if !self.planner.is_empty() => {
+                self.start_cycle();
+                self.waiting = Some(w);
+                return Served::Blocked;
+            }
+            Waiting::End => {
+                self.say("[MSG:Pgm End]");
+                self.say("ok");
+            }
+            Waiting::Pause { held: false } => {
+                // the main loop waits while the hold is in force; it comes back here once `~` ended it
+                self.hold = true;
+                self.decel_left_s = 0.0;
+                self.waiting = Some(Waiting::Pause { held: true });
+                return Served::Blocked;
+            }
+            Waiting::Pause { held: true } => self.say("ok"),
             Waiting::Dwell { until_s, then } => {
                 if self.sim_time_s < until_s {
                     self.waiting = Some(Waiting::Dwell { until_s, then });
                     return Served::Blocked;
                 }
                 match then {
-                    Some(b) => {
-                        self.waiting = Some(Waiting::Plan(b));
+                    Some(w) => {
+                        self.waiting = Some(*w);
                         return Served::Again;
                     }
                     None => self.say("ok"),
@@ -294,26 +299,39 @@ impl Controller {
     /// (`ALARM:4`), else run the move alone; once stopped, report `[PRB:]` (after `ALARM:5` when a G38.2 or
     /// G38.4 never changed contact) and answer `ok`. The parser then continues from where the machine
     /// stopped (GRBL's `gc_sync_position`), except after `ALARM:4`, when it never moved.
-    fn serve_probe(&mut self, block: Block, away: bool, no_error: bool, started: bool) -> Served {
-        let wait = |c: &mut Controller, block: Block, started: bool| {
+    fn serve_probe(
+        &mut self,
+        block: Block,
+        away: bool,
+        no_error: bool,
+        started: bool,
+        then: Option<Box<Waiting>>,
+    ) -> Served {
+        let wait = |c: &mut Controller, block: Block, started: bool, then: Option<Box<Waiting>>| {
             c.waiting = Some(Waiting::Probe {
                 block,
                 away,
                 no_error,
                 started,
+                then,
             });
             Served::Blocked
         };
         if !started {
             if !self.planner.is_empty() {
                 self.start_cycle();
-                return wait(self, block, false);
+                return wait(self, block, false, then);
             }
+            // GRBL checks the probe's state before its move's soft limit (`mc_probe_cycle`, then `mc_line`)
             if self.probe_contact(self.pos) != away {
                 self.alarm_unlockable(4);
                 self.parser_pos = self.pos;
                 self.say("ok");
                 return Served::Done;
+            }
+            if self.beyond_soft_limits(block.to) {
+                self.soft_limit();
+                return Served::Blocked;
             }
             // the fraction of the move where the tip crosses the plate, going down (toward) or up (away)
             let (z0, z1) = (block.from[2], block.to[2]);
@@ -330,10 +348,10 @@ impl Controller {
             self.probing = Some(super::controller::Probing { trigger_at, hit: false });
             self.planner.push_back(block.clone());
             self.start_cycle();
-            return wait(self, block, true);
+            return wait(self, block, true, then);
         }
         if !self.planner.is_empty() {
-            return wait(self, block, true);
+            return wait(self, block, true, then);
         }
         let hit = self.probing.take().is_some_and(|p| p.hit);
         if hit {
@@ -346,6 +364,10 @@ impl Controller {
         }
         self.parser_pos = self.pos;
         self.report_probe();
+        if let Some(w) = then {
+            self.waiting = Some(*w);
+            return Served::Again;
+        }
         self.say("ok");
         Served::Done
     }
@@ -377,7 +399,7 @@ impl Controller {
             return;
         }
         let v = self.block_speed_mm_s(b);
-        let len: f64 = (0..3).map(|i| (b.to[i] - b.from[i]).powi(2)).sum::<f64>().sqrt();
+        let len = b.length_mm();
         let t_end = (t_hit + v * v / (2.0 * a) / len.max(1e-12)).min(1.0);
         let at = b.at(t_hit);
         let end = b.at(t_end);

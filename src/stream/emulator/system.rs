@@ -230,7 +230,10 @@ impl Controller {
         self.jogging = true;
         self.state = State::Run;
         if self.planner_full() {
-            self.waiting = Some(super::planner::Waiting::Plan((b, None)));
+            self.waiting = Some(super::planner::Waiting::Plan {
+                blocks: [b].into(),
+                then: None,
+            });
             return Reply::Answered; // `ok` once the planner has room
         }
         self.planner.push_back(b);

@@ -3,7 +3,8 @@
 //! controller reports; [`locate`] finds the prefix whose path ends at, or passes through, that position.
 //! It refuses, rather than guesses, when the position lies on the path more than once.
 
-use crate::stream::program::{MotionMode, Program};
+use crate::gcode::moves::{Arc, Plane};
+use crate::stream::program::{words, Distance, Line, MotionMode, Program};
 
 /// Which of the candidate lines ran, from where motion stopped.
 #[derive(Debug, Clone, PartialEq)]
@@ -27,6 +28,9 @@ pub struct Evidence {
     /// Where the tool was before the first candidate, when the program model cannot know it (the
     /// position reported at the start of a fresh run, before anything moved).
     pub origin: Option<[f64; 3]>,
+    /// GRBL's arc tolerance `$12`, mm: how far inside an arc the chords it runs may pass (a stop inside an
+    /// arc lies on a chord).
+    pub arc_tolerance_mm: f64,
     /// The controller is idle with nothing left to run (after a disconnect it finished what it had):
     /// motion ended at the end of a block, so a stop inside a line is no explanation.
     pub at_rest: bool,
@@ -51,6 +55,72 @@ fn project(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> (f64, [f64; 3]) {
     (t, q)
 }
 
+/// The arc line `l` draws from `start` (work mm): its centre from the `I J K` offsets (relative to the
+/// start, GRBL's only arc distance mode) in the line's plane and units. `None` for anything else, the `R`
+/// form included: a stop inside such a line is not located.
+pub(super) fn arc_of(l: &Line, start: [f64; 3]) -> Option<Arc> {
+    let cw = match l.motion? {
+        MotionMode::ArcCw => true,
+        MotionMode::ArcCcw => false,
+        _ => return None,
+    };
+    let end = known(l.end_mm)?;
+    let ws = words(&l.block).ok()?;
+    if l.after.arc_distance != Distance::Incremental || ws.iter().any(|w| w.letter == 'R') {
+        return None;
+    }
+    let k = l.after.units.mm();
+    let mut center = start;
+    for w in &ws {
+        if let Some(i) = ['I', 'J', 'K'].iter().position(|&c| c == w.letter) {
+            center[i] = start[i] + w.value * k;
+        }
+    }
+    Some(Arc {
+        to: end,
+        center,
+        plane: Plane::from_g(l.after.plane),
+        cw,
+        feed_mm_min: l.after.feed_mm_min.unwrap_or(0.0),
+    })
+}
+
+/// GRBL's default `$12`, mm.
+pub const DEFAULT_ARC_TOLERANCE_MM: f64 = 0.002;
+
+/// How far inside `arc` (from `from`) the chords GRBL's `mc_arc` runs it with pass at most, mm: `n =
+/// ⌊|θ·r/2| / √(tol·(2r − tol))⌋` chords (one when `n` is 0) of angle `θ/n`, each missing the arc by
+/// `r(1 − cos(θ/2n))` — at least `tol` once `n` ≥ 1 (the floor makes the chords longer), up to 4× it.
+pub fn chord_sagitta_mm(arc: &Arc, from: [f64; 3], tol: f64) -> f64 {
+    let r = arc.radius(from);
+    let theta = arc.sweep(from).1.abs();
+    let per = (tol * (2.0 * r - tol)).sqrt();
+    let n = if per > 0.0 {
+        ((0.5 * theta * r) / per).floor().max(1.0)
+    } else {
+        1.0
+    };
+    r * (1.0 - (theta / (2.0 * n)).min(std::f64::consts::PI).cos())
+}
+
+/// Where `p` lies along moving line `l` from `a` to `b`: the fraction of the way, the point of the path
+/// there (for a straight line the projection, unclamped; for an arc its angle, `None` outside it), and how
+/// far from that point the controller may be on it (for an arc the chords' sagitta, `arc_tol` being `$12`).
+fn along(l: &Line, a: [f64; 3], b: [f64; 3], p: [f64; 3], arc_tol: f64) -> Option<(f64, [f64; 3], f64)> {
+    match l.motion {
+        Some(MotionMode::Rapid | MotionMode::Linear) => {
+            let (t, q) = project(a, b, p);
+            Some((t, q, 0.0))
+        }
+        Some(MotionMode::ArcCw | MotionMode::ArcCcw) => {
+            let arc = arc_of(l, a)?;
+            let (t, q) = arc.project(a, p)?;
+            Some((t, q, chord_sagitta_mm(&arc, a, arc_tol)))
+        }
+        _ => None,
+    }
+}
+
 /// Given the lines that may have run (`candidates`, in order; execution is a prefix of them) and the
 /// evidence of where motion stopped, find which candidates ran completely and which one was cut, and where.
 ///
@@ -61,14 +131,15 @@ fn project(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> (f64, [f64; 3]) {
 /// [`Located::ambiguous`] says why. `Err` when the position lies on none of the candidates' path.
 pub fn locate(program: &Program, candidates: &[usize], ev: &Evidence, tol: f64) -> Result<Located, String> {
     match ev.ln.map(|l| l as usize).filter(|l| candidates.contains(l)) {
-        Some(ln) => locate_named(program, candidates, ln, ev.position, tol),
+        Some(ln) => locate_named(program, candidates, ln, ev, tol),
         None => locate_by_position(program, candidates, ev, tol),
     }
 }
 
 /// The controller names the line: every candidate before it ran; where on it motion stopped decides
 /// between complete, not started and cut (which needs no known start point).
-fn locate_named(program: &Program, cands: &[usize], ln: usize, p: [f64; 3], tol: f64) -> Result<Located, String> {
+fn locate_named(program: &Program, cands: &[usize], ln: usize, ev: &Evidence, tol: f64) -> Result<Located, String> {
+    let p = ev.position;
     let mut executed: Vec<usize> = cands.iter().copied().filter(|&n| n < ln).collect();
     let l = program
         .line(ln)
@@ -89,18 +160,26 @@ fn locate_named(program: &Program, cands: &[usize], ln: usize, p: [f64; 3], tol:
             ambiguous: None,
         });
     }
+    let mut at = p;
     if let (Some(a), Some(b)) = (start, end) {
-        let (t, q) = project(a, b, p);
-        if dist(q, p) > tol || !(0.0..=1.0).contains(&t) {
-            return Err(format!(
+        match along(l, a, b, p, ev.arc_tolerance_mm) {
+            Some((t, q, slack)) if dist(q, p) <= tol + slack && (0.0..=1.0).contains(&t) => {
+                // inside an arc the resume continues from the arc's own point (the stop lies on a chord)
+                if l.motion != Some(MotionMode::Rapid) && l.motion != Some(MotionMode::Linear) {
+                    at = q;
+                }
+            }
+            _ => {
+                return Err(format!(
                 "the controller reports line {ln} executing but the stop position ({:.3}, {:.3}, {:.3}) is not on it",
                 p[0], p[1], p[2]
-            ));
+            ))
+            }
         }
     }
     Ok(Located {
         executed,
-        partial: Some((ln, p)),
+        partial: Some((ln, at)),
         ambiguous: None,
     })
 }
@@ -126,7 +205,7 @@ fn locate_by_position(program: &Program, cands: &[usize], ev: &Evidence, tol: f6
             &cands[..cands.len().min(8)]
         ));
     }
-    let cmp = |x: &(usize, f64), y: &(usize, f64)| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1));
+    let cmp = |x: &(usize, f64, [f64; 3]), y: &(usize, f64, [f64; 3])| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1));
     let lo = *consistent.iter().min_by(|x, y| cmp(x, y)).expect("non-empty");
     let hi = *consistent.iter().max_by(|x, y| cmp(x, y)).expect("non-empty");
     let spans_motion = (lo.0..hi.0).any(|i| program.line(cands[i]).is_some_and(|l| l.moves));
@@ -145,7 +224,7 @@ fn locate_by_position(program: &Program, cands: &[usize], ev: &Evidence, tol: f6
         (hi, None)
     };
     let executed = cands[..take.0.min(cands.len())].to_vec();
-    let partial = (take.1 > 0.0 && take.0 < cands.len()).then(|| (cands[take.0], p));
+    let partial = (take.1 > 0.0 && take.0 < cands.len()).then(|| (cands[take.0], take.2));
     Ok(Located {
         executed,
         partial,
@@ -153,12 +232,18 @@ fn locate_by_position(program: &Program, cands: &[usize], ev: &Evidence, tol: f6
     })
 }
 
-/// Every progress `(index, fraction)` consistent with the evidence: `cands[..index]` complete and
-/// `cands[index]` done up to `fraction`. A candidate whose start the program model does not know starts at
-/// the evidence's origin as long as no moving candidate precedes it.
-fn explanations(program: &Program, cands: &[usize], ev: &Evidence, tol: f64) -> Result<Vec<(usize, f64)>, String> {
+/// Every progress `(index, fraction, point)` consistent with the evidence: `cands[..index]` complete and
+/// `cands[index]` done up to `fraction`, where the resume would continue from `point` (the stop position,
+/// or inside an arc the arc's point at its angle). A candidate whose start the program model does not know
+/// starts at the evidence's origin as long as no moving candidate precedes it.
+fn explanations(
+    program: &Program,
+    cands: &[usize],
+    ev: &Evidence,
+    tol: f64,
+) -> Result<Vec<(usize, f64, [f64; 3])>, String> {
     let p = ev.position;
-    let mut consistent: Vec<(usize, f64)> = Vec::new();
+    let mut consistent: Vec<(usize, f64, [f64; 3])> = Vec::new();
     let mut moved = false;
     for (i, &n) in cands.iter().enumerate() {
         let l = program
@@ -168,11 +253,11 @@ fn explanations(program: &Program, cands: &[usize], ev: &Evidence, tol: f64) -> 
         if !l.moves {
             if let Some(s) = start {
                 if dist(s, p) <= tol {
-                    consistent.push((i, 0.0));
-                    consistent.push((i + 1, 0.0));
+                    consistent.push((i, 0.0, p));
+                    consistent.push((i + 1, 0.0, p));
                 }
             } else if i == 0 && cands.len() == 1 {
-                consistent.push((1, 0.0));
+                consistent.push((1, 0.0, p));
             }
             continue;
         }
@@ -181,17 +266,20 @@ fn explanations(program: &Program, cands: &[usize], ev: &Evidence, tol: f64) -> 
             return Err(format!("line {n}'s end position is unknown to the program model"));
         };
         if dist(b, p) <= tol {
-            consistent.push((i + 1, 0.0));
+            consistent.push((i + 1, 0.0, p));
         }
         // From an unknown start only the end can be recognised.
         let Some(a) = start else { continue };
         if dist(a, p) <= tol {
-            consistent.push((i, 0.0));
+            consistent.push((i, 0.0, p));
         }
-        if !ev.at_rest && matches!(l.motion, Some(MotionMode::Rapid | MotionMode::Linear)) {
-            let (t, q) = project(a, b, p);
-            if t > 0.0 && t < 1.0 && dist(q, p) <= tol && dist(a, p) > tol && dist(b, p) > tol {
-                consistent.push((i, t));
+        if ev.at_rest || dist(a, p) <= tol || dist(b, p) <= tol {
+            continue;
+        }
+        if let Some((t, q, slack)) = along(l, a, b, p, ev.arc_tolerance_mm) {
+            if t > 0.0 && t < 1.0 && dist(q, p) <= tol + slack {
+                let arc = !matches!(l.motion, Some(MotionMode::Rapid | MotionMode::Linear));
+                consistent.push((i, t, if arc { q } else { p }));
             }
         }
     }
@@ -214,6 +302,7 @@ mod tests {
             ln,
             position,
             origin: None,
+            arc_tolerance_mm: DEFAULT_ARC_TOLERANCE_MM,
             at_rest: false,
         }
     }
@@ -244,6 +333,46 @@ mod tests {
         assert!(locate(&p, &c, &ev(None, [3.0, 3.0, 3.0]), 0.005)
             .unwrap_err()
             .contains("none of"));
+    }
+
+    /// A stop inside an arc is located by the arc's angle, by position and by `Ln` alike, and the resume
+    /// point is the arc's own point there (the controller stopped on a chord, inside the arc by its sagitta).
+    #[test]
+    fn locates_a_stop_inside_an_arc() {
+        // a half circle of radius 5 about (5, 0) from (0, 0) to (10, 0), clockwise: over the top
+        let p = prog("G21G90\nG0X0Y0Z0\nG2X10Y0I5J0F300\nG1X12\n");
+        let c = vec![3, 4];
+        let on_chord = [5.0 - 5.0 * 0.8_f64.cos() * 0.9996, 5.0 * 0.8_f64.sin() * 0.9996, 0.0];
+        for ln in [None, Some(3)] {
+            let loc = locate(&p, &c, &ev(ln, on_chord), 0.005).unwrap();
+            assert!(loc.executed.is_empty(), "{loc:?}");
+            let (n, at) = loc.partial.unwrap();
+            assert_eq!(n, 3);
+            let r = (at[0] - 5.0).hypot(at[1]);
+            assert!((r - 5.0).abs() < 1e-9, "on the arc: {at:?}");
+            assert!(dist(at, on_chord) < 0.005);
+        }
+        // the mirror point below the axis is not on this arc (it turns over the top)
+        let below = [on_chord[0], -on_chord[1], 0.0];
+        assert!(locate(&p, &c, &ev(None, below), 0.005).is_err());
+    }
+
+    /// A short arc GRBL runs as one chord (θ = 0.11 rad at r = 5: ⌊0.275 / √(0.002·9.998)⌋ = 1) passes
+    /// r(1 − cos(θ/2)) = 7.6 µm inside the arc at its middle, beyond the 5 µm position tolerance: the
+    /// chord's sagitta is allowed for, so a stop there is located; as far off a straight line it is not.
+    #[test]
+    fn a_stop_on_a_long_chord_of_a_short_arc_is_located() {
+        let (c, s) = (5.0 * 0.11_f64.cos(), 5.0 * 0.11_f64.sin());
+        let p = prog(&format!("G21G90\nG0X5Y0Z0\nG3X{c:.6}Y{s:.6}I-5J0F300\nG1X0\n"));
+        let arc = arc_of(p.line(3).unwrap(), [5.0, 0.0, 0.0]).unwrap();
+        let sag = chord_sagitta_mm(&arc, [5.0, 0.0, 0.0], DEFAULT_ARC_TOLERANCE_MM);
+        assert!((sag - 5.0 * (1.0 - 0.055_f64.cos())).abs() < 1e-6, "{sag}");
+        let mid = [(5.0 + c) / 2.0, s / 2.0, 0.0];
+        let loc = locate(&p, &[3, 4], &ev(None, mid), 0.005).unwrap();
+        assert_eq!(loc.partial.map(|x| x.0), Some(3), "{loc:?}");
+        // the same distance beside line 4 (from the arc's end to X0) is no stop on it
+        let beside = [2.0, s + sag, 0.0];
+        assert!(locate(&p, &[4], &ev(None, beside), 0.005).is_err());
     }
 
     /// Issue 14's CI flake (seed 60): the link dropped before line 2 arrived, so the tool never left the

@@ -101,6 +101,8 @@ struct Session<'a> {
     resume_request: &'a AtomicBool,
     /// A feed hold asked for by the user is in force (cleared by the resume request).
     user_hold: bool,
+    /// The program pause (`M0`) the user was last told about (its line).
+    pause_noted: Option<usize>,
     journal: Option<Journal>,
     rbuf: Vec<u8>,
     saw: String,
@@ -113,6 +115,9 @@ struct Session<'a> {
     wco: [f64; 3],
     /// Acked-ok program lines not yet known executed, in order.
     planned: VecDeque<usize>,
+    /// At the last stop, the oldest unanswered line was one GRBL answers after (part of) its motion ran
+    /// ([`Line::answered_after_its_motion`]: an arc, a move ending the program).
+    unanswered_running: Option<usize>,
     sent: BTreeSet<usize>,
     errors: BTreeSet<usize>,
     executed: BTreeSet<usize>,
@@ -224,6 +229,7 @@ impl<'a> Session<'a> {
             hold_request: controls.hold,
             resume_request: controls.resume,
             user_hold: false,
+            pause_noted: None,
             journal: None,
             rbuf: Vec::new(),
             saw: String::new(),
@@ -235,6 +241,7 @@ impl<'a> Session<'a> {
             status_seq: 0,
             wco: [0.0; 3],
             planned: VecDeque::new(),
+            unanswered_running: None,
             sent: BTreeSet::new(),
             errors: BTreeSet::new(),
             executed: BTreeSet::new(),

@@ -6,12 +6,13 @@
 use std::path::Path;
 
 use super::handshake::Info;
-use super::locate::known;
+use super::locate::{arc_of, known};
 use super::{
     locate, record_located, start_record, Config, Evidence, Outcome, Outgoing, Session, Stats, StreamError, Tag,
 };
+use crate::gcode::program::MAX_BLOCK_CHARS;
 use crate::stream::journal::{Journal, JournalState, Record};
-use crate::stream::program::{Distance, Line, Modal, MotionMode, Program, Spindle, Units};
+use crate::stream::program::{words, Distance, Line, Modal, MotionMode, Program, Spindle, Units};
 use crate::stream::protocol::MachineState;
 
 /// Load the journal and check that this run can resume it.
@@ -114,12 +115,18 @@ impl Session<'_> {
             position: p,
             // Before anything moved the tool is where the first run found it.
             origin: if moved { None } else { st.origin },
+            arc_tolerance_mm: self.arc_tolerance_mm(),
             // Idle with nothing executing: the controller finished what it had, so motion ended at the
-            // end of a block. Not after an alarm: it stopped motion wherever it was, and the controller is
-            // Idle only because it was reset and unlocked.
+            // end of a block — when nothing stopped it: the link dropped (or the streamer died) and it ran
+            // on. Not after an alarm, nor after the streamer's own hold and reset (an error, Ctrl-C, a
+            // silence): motion stopped wherever it was, and the controller is Idle only because it was
+            // reset (and unlocked).
             at_rest: status.state == Some(MachineState::Idle)
                 && status.line.is_none()
-                && !matches!(&st.stop, Some(Record::Stop { reason, .. }) if reason == "alarm"),
+                && match &st.stop {
+                    Some(Record::Stop { reason, .. }) => reason == "disconnect",
+                    _ => true,
+                },
         };
         let loc =
             locate(program, &candidates, &ev, self.cfg.position_tolerance_mm).map_err(|what| StreamError::Resume {
@@ -218,17 +225,62 @@ fn plan_resume(
     let pre = approach(line, first, moved, partial, cfg, travel)?;
     let mut queue: Vec<Outgoing> = pre.into_iter().map(Outgoing::synthetic).collect();
     let mut rest_from = first;
-    if let Some((n, _)) = partial {
-        queue.push(finish_cut(line, n, cfg)?);
+    if let Some((n, at)) = partial {
+        queue.push(finish_cut(line, n, at, cfg)?);
         queue.push(Outgoing::synthetic(restore_modal(&line.after)));
         rest_from = n + 1;
     } else {
         queue.push(Outgoing::synthetic(restore_modal(&line.before)));
     }
+    // the approach ended in G1: the first line that moves in the arc mode it inherits needs the mode written
+    let mut inherits_arc = partial.is_none();
     for l in program.sendable().filter(|l| l.number >= rest_from) {
-        queue.push(Outgoing::program_line(l, cfg.number_lines));
+        let mut out = Outgoing::program_line(l, cfg.number_lines);
+        if inherits_arc {
+            let (text, settled) = with_modal_arc(l, &out.text)?;
+            out.text = text;
+            inherits_arc = !settled;
+        }
+        queue.push(out);
     }
     Ok((first, queue))
+}
+
+/// A resumed line, `text` as sent, when it moves in the arc mode (`G2`/`G3`) it inherits from the lines
+/// before the resume point: the approach ended in `G1`, and a block of only axis words and offsets would
+/// then be read as `G1` (GRBL refuses its unused `I J K`), so the mode is written into it, after any `N` word.
+/// Also says whether the motion mode is settled from this line on (it moves, or sets its own mode).
+fn with_modal_arc(l: &Line, text: &str) -> Result<(String, bool), String> {
+    let ws = words(&l.block).unwrap_or_default();
+    let own_motion = ws
+        .iter()
+        .any(|w| w.letter == 'G' && ([0.0, 1.0, 2.0, 3.0, 80.0].contains(&w.value) || (38.0..39.0).contains(&w.value)));
+    let axis = ws.iter().any(|w| matches!(w.letter, 'X' | 'Y' | 'Z'));
+    let word = match l.before.motion {
+        MotionMode::ArcCw => "G2",
+        MotionMode::ArcCcw => "G3",
+        _ => return Ok((text.to_string(), true)),
+    };
+    if own_motion || !axis {
+        return Ok((text.to_string(), own_motion));
+    }
+    // after the `N` word the streamer numbers the line with, if any
+    let at = if text.starts_with('N') {
+        text.find(|c: char| c.is_ascii_alphabetic() && c != 'N')
+            .unwrap_or(text.len())
+    } else {
+        0
+    };
+    let out = format!("{}{word}{}", &text[..at], &text[at..]);
+    if out.len() > MAX_BLOCK_CHARS {
+        return Err(format!(
+            "line {} continues the arc mode {word} of the lines before it; written into it for the resume it \
+             would be {} characters, more than GRBL's {MAX_BLOCK_CHARS}",
+            l.number,
+            out.len()
+        ));
+    }
+    Ok((out, true))
 }
 
 /// Refuse when a moving line after `first` ran, or was cut, although `first` did not: GRBL had already
@@ -325,6 +377,8 @@ fn safe_z(cfg: &Config, target: [f64; 3], travel: Option<&Travel>) -> Result<f64
 fn restore_modal(m: &Modal) -> String {
     let k = if m.units == Units::Inch { 25.4 } else { 1.0 };
     let mut s = String::from(if m.units == Units::Inch { "G20" } else { "G21" });
+    // the preamble selected G17
+    s += &format!("G{}", m.plane);
     s += if m.distance == Distance::Incremental {
         "G91"
     } else {
@@ -341,18 +395,28 @@ fn restore_modal(m: &Modal) -> String {
     s
 }
 
-/// The rest of line `n`, cut mid-way: an absolute `G0`/`G1` to its end from wherever the tool is.
-fn finish_cut(line: &Line, n: usize, cfg: &Config) -> Result<Outgoing, String> {
-    let mode = match line.motion {
-        Some(MotionMode::Rapid) => "G0",
-        Some(MotionMode::Linear) => "G1",
-        _ => {
-            return Err(format!(
-                "line {n} is an arc cut mid-way; resuming inside an arc is not supported"
-            ))
-        }
-    };
+/// The rest of line `n`, cut mid-way at `at` (work mm, where the approach brought the tool): an absolute
+/// `G0`/`G1` to its end, or for an arc the same arc on from there — its plane, direction and end, the
+/// offsets `I J K` taken from the point the approach reached (`at` as written) to the arc's centre.
+fn finish_cut(line: &Line, n: usize, at: [f64; 3], cfg: &Config) -> Result<Outgoing, String> {
     let end = known(line.end_mm).ok_or_else(|| format!("line {n}'s end position is unknown"))?;
+    let (mode, offsets) = match line.motion {
+        Some(MotionMode::Rapid) => ("G0".to_string(), String::new()),
+        Some(MotionMode::Linear) => ("G1".to_string(), String::new()),
+        Some(MotionMode::ArcCw | MotionMode::ArcCcw) => {
+            let arc = known(line.start_mm)
+                .and_then(|start| arc_of(line, start))
+                .ok_or_else(|| format!("line {n} is an arc cut mid-way whose centre is not known (R form?)"))?;
+            let (a, b, _) = arc.plane.axes();
+            let reached = |i: usize| fmt_mm(at[i]).parse::<f64>().unwrap_or(at[i]);
+            let offset = |i: usize| format!("{}{}", ['I', 'J', 'K'][i], fmt_mm(arc.center[i] - reached(i)));
+            (
+                format!("G{}{}", arc.plane.g(), if arc.cw { "G2" } else { "G3" }),
+                offset(a.min(b)) + &offset(a.max(b)),
+            )
+        }
+        _ => return Err(format!("line {n} is cut mid-way and is not a G0, G1, G2 or G3 move")),
+    };
     let feed = line
         .after
         .feed_mm_min
@@ -365,7 +429,7 @@ fn finish_cut(line: &Line, n: usize, cfg: &Config) -> Result<Outgoing, String> {
     };
     Ok(Outgoing {
         text: format!(
-            "{num}G21G90{mode}X{}Y{}Z{}{feed}",
+            "{num}G21G90{mode}X{}Y{}Z{}{offsets}{feed}",
             fmt_mm(end[0]),
             fmt_mm(end[1]),
             fmt_mm(end[2])
@@ -406,7 +470,7 @@ mod tests {
                 "G0X10Y4",
                 "G1Z-1F100",
                 "N6G21G90G1X10Y10Z-1F100",
-                "G21G90G1F100"
+                "G21G17G90G1F100"
             ]
         );
         assert_eq!(texts[8], "N7G1X0");
@@ -435,6 +499,70 @@ mod tests {
         };
         let e = plan_resume(&p, &st, &Config::default(), Some(&far)).unwrap_err();
         assert!(e.contains("outside the machine's travel"), "{e}");
+    }
+
+    /// A stop inside an arc resumes on the same arc: approach to the stop point, then `G2`/`G3` in the
+    /// arc's plane to its end with the offsets from that point to the centre — the same radius, within what
+    /// GRBL accepts (error 33 beyond 0.005 mm) — and the plane restored for the lines after it.
+    #[test]
+    fn a_cut_arc_resumes_on_the_same_arc() {
+        // G18 (Z→X): a half turn of radius 2 about (2, 0, −1) from (0, 0, −1) to (4, 0, −1), clockwise
+        let p = prog("G21G90\nG0X0Y0Z-1\nG18G1F100\nG2X4Z-1I2K0\nG1X5\n");
+        let arc = arc_of(p.line(4).unwrap(), [0.0, 0.0, -1.0]).unwrap();
+        let at = arc.point_at([0.0, 0.0, -1.0], 0.3);
+        let st = JournalState {
+            executed: (1..=3).collect(),
+            partial: Some((4, at)),
+            ..JournalState::default()
+        };
+        let (first, q) = plan_resume(&p, &st, &Config::default(), None).unwrap();
+        assert_eq!(first, 4);
+        let cut = &q.iter().find(|o| o.tag == Tag::Line(4)).unwrap().text;
+        assert!(cut.starts_with("N4G21G90G18G2X4Y0Z-1I"), "{cut}");
+        let word = |c: char| -> f64 {
+            let rest = &cut[cut.find(c).unwrap() + 1..];
+            let end = rest.find(|ch: char| ch.is_ascii_alphabetic()).unwrap_or(rest.len());
+            rest[..end].parse().unwrap()
+        };
+        let reached = [
+            fmt_mm(at[0]).parse::<f64>().unwrap(),
+            0.0,
+            fmt_mm(at[2]).parse::<f64>().unwrap(),
+        ];
+        let (cx, cz) = (reached[0] + word('I'), reached[2] + word('K'));
+        assert!(
+            (cx - 2.0).abs() < 1e-4 && (cz + 1.0).abs() < 1e-4,
+            "centre ({cx}, {cz}) from {cut}"
+        );
+        let r_end = (4.0 - cx).hypot(-1.0 - cz);
+        let r_start = (reached[0] - cx).hypot(reached[2] - cz);
+        assert!((r_end - r_start).abs() < 0.005, "{r_start} vs {r_end}");
+        let next = q.iter().position(|o| o.tag == Tag::Line(4)).unwrap() + 1;
+        assert!(q[next].text.starts_with("G21G18G90"), "{}", q[next].text);
+    }
+
+    /// A resume that starts at a line moving in the arc mode of the lines before it writes the mode into
+    /// that line (the approach ended in `G1`); a line with its own motion word is sent as it is.
+    #[test]
+    fn a_resume_at_a_modal_arc_line_restates_the_arc_mode() {
+        let p = prog("G21G90\nG0X0Y0Z1\nG1Z-1F100\nG2X2Y0I1J0\nX4Y0I1J0\nG3X6Y0I1J0\nF200\nX8Y0I1J0\n");
+        // (lines done, first resumed, the line looked at, as sent): a line without axis words passes the
+        // mode on to the next
+        for (done, first, n, expect) in [
+            (4, 5, 5, "N5G2X4Y0I1J0"),
+            (5, 6, 6, "N6G3X6Y0I1J0"),
+            (6, 7, 7, "N7F200"),
+            (6, 7, 8, "N8G3X8Y0I1J0"),
+        ] {
+            let st = JournalState {
+                executed: (1..=done).collect(),
+                ..JournalState::default()
+            };
+            let (f, q) = plan_resume(&p, &st, &Config::default(), None).unwrap();
+            assert_eq!(f, first);
+            let sent = &q.iter().find(|o| o.tag == Tag::Line(n)).unwrap().text;
+            assert_eq!(sent, expect);
+        }
     }
 
     #[test]

@@ -8,7 +8,8 @@ use std::time::{Duration, Instant};
 
 use super::{Fault, Outcome, Outgoing, Session, StreamError, Tag};
 use crate::stream::journal::Record;
-use crate::stream::protocol::{error_text, parse_response, Decision, Realtime, Response};
+use crate::stream::program::Line;
+use crate::stream::protocol::{error_text, parse_response, Decision, MachineState, Realtime, Response};
 
 impl Session<'_> {
     /// Stream the queue. Returns when everything executed or after a safe stop.
@@ -71,7 +72,9 @@ impl Session<'_> {
     /// Act on the user's hold and resume requests: a feed hold (`!`) decelerates the machine along its path
     /// to `Hold:0`, where it waits with the spindle on; streaming goes on into the controller's buffer, and
     /// what executed is still read from the status reports. A cycle start (`~`) resumes. A resume without a
-    /// hold of the user's is ignored (a hold from the machine's own button stays the machinist's).
+    /// hold of the user's is ignored (a hold from the machine's own button stays the machinist's), except at
+    /// the program's own pause (`M0`, as at a tool change): GRBL waits at `Hold:0` for a cycle start, and the
+    /// user is told to do what the program asks and resume.
     fn interactive_hold(&mut self) -> Result<(), Fault> {
         if self.hold_request.swap(false, Ordering::SeqCst) && !self.user_hold {
             self.write(&[Realtime::FeedHold.byte()])?;
@@ -79,12 +82,33 @@ impl Session<'_> {
             self.observer
                 .note("feed hold: the machine decelerates and waits (SIGUSR2 resumes, Ctrl-C stops the job)");
         }
-        if self.resume_request.swap(false, Ordering::SeqCst) && self.user_hold {
+        let pause = self.program_pause();
+        if let Some(n) = pause.filter(|&n| self.pause_noted != Some(n)) {
+            self.pause_noted = Some(n);
+            self.observer.note(&format!(
+                "the program pauses at line {n} (M0): do what its comments before it ask (a tool change: \
+                 change the bit, touch off Z again), then resume (`~` or Enter, SIGUSR2); Ctrl-C stops the job"
+            ));
+        }
+        if self.resume_request.swap(false, Ordering::SeqCst) && (self.user_hold || pause.is_some()) {
             self.write(&[Realtime::CycleStart.byte()])?;
             self.user_hold = false;
             self.observer.note("cycle start: resuming");
         }
         Ok(())
+    }
+
+    /// The line of the program's pause (`M0`) GRBL is waiting at: the oldest unanswered line holds `M0` and
+    /// the last report shows a completed hold.
+    fn program_pause(&self) -> Option<usize> {
+        let held = self
+            .status
+            .as_ref()
+            .is_some_and(|s| s.state == Some(MachineState::Hold { sub: 0 }));
+        match self.counter.pending().next() {
+            Some(Tag::Line(n)) if held => self.program.line(*n).is_some_and(Line::pauses).then_some(*n),
+            _ => None,
+        }
     }
 
     /// Send queued lines while the receive buffer has room for them (a line sent alone also waits for an

@@ -10,6 +10,7 @@ use super::{
     locate, record_located, Evidence, Fault, Located, Outcome, Session, StopReason, StopReport, StreamError, Tag,
 };
 use crate::stream::journal::Record;
+use crate::stream::program::Line;
 use crate::stream::protocol::{alarm_text, error_text, parse_response, MachineState, Realtime, Response, Status};
 
 impl Session<'_> {
@@ -107,9 +108,10 @@ impl Session<'_> {
     ) -> Result<bool, StreamError> {
         let ln = stopped.and_then(|s| s.line);
         let p = after.or(stopped).and_then(|s| self.work_position(s));
-        // Only planned lines (answered `ok`) can have run: the rest were flushed by the reset
-        // or, at an alarm, never parsed.
-        let candidates: Vec<usize> = self.planned.iter().copied().collect();
+        // Only planned lines (answered `ok`) can have run — and the oldest unanswered one when GRBL answers it
+        // after its motion (an arc it was still planning chord by chord, a move ending the program): the
+        // rest were flushed by the reset or, at an alarm, never parsed.
+        let candidates: Vec<usize> = self.planned.iter().copied().chain(self.unanswered_running).collect();
         let Some(p) = p else {
             *message += "; the controller reported no position";
             return Ok(false);
@@ -122,6 +124,7 @@ impl Session<'_> {
             ln,
             position: p,
             origin: if moved { None } else { self.origin },
+            arc_tolerance_mm: self.arc_tolerance_mm(),
             at_rest: false,
         };
         let loc: Located = match locate(self.program, &candidates, &ev, self.cfg.position_tolerance_mm) {
@@ -183,6 +186,12 @@ impl Session<'_> {
             notes.push(e);
             return (stopped, None, Some(notes.join("; ")));
         }
+        self.unanswered_running = match self.counter.pending().next() {
+            Some(Tag::Line(n)) => {
+                Some(*n).filter(|&n| self.program.line(n).is_some_and(Line::answered_after_its_motion))
+            }
+            _ => None,
+        };
         self.counter.flush();
         let after = match self.status_after_reset() {
             Ok(a) => a,

@@ -11,6 +11,15 @@ use crate::stream::journal::Record;
 use crate::stream::protocol::{MachineState, Status, PLANNER_BLOCKS};
 
 impl Session<'_> {
+    /// The controller's arc tolerance `$12` (mm) from its settings, GRBL's default when not read.
+    pub(super) fn arc_tolerance_mm(&self) -> f64 {
+        self.settings
+            .get(&12)
+            .copied()
+            .filter(|v| v.is_finite() && *v > 0.0)
+            .unwrap_or(super::locate::DEFAULT_ARC_TOLERANCE_MM)
+    }
+
     /// The work position of a report: `WPos`, or `MPos` less the last `WCO`.
     pub(super) fn work_position(&self, st: &Status) -> Option<[f64; 3]> {
         if let Some(w) = st.wpos {
