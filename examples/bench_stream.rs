@@ -111,19 +111,28 @@ fn ten_thousand_lines(dir: &Path, run: usize) {
     }
     let prog = program(dir, &format!("big{run}.nc"), &text);
     let emu = emulator();
+    let mut tap = BfTap {
+        inner: SerialLink::open(&emu.port_path().expect("port up"), BAUD).unwrap(),
+        pending: Vec::new(),
+        reports: 0,
+        max_used: 0,
+    };
     let t0 = Instant::now();
-    let stats = stream(&emu, &prog, &dir.join(format!("big{run}.journal")));
+    let stats = stream_on(&emu, &mut tap, &prog, &dir.join(format!("big{run}.journal")));
     let wall = t0.elapsed().as_secs_f64();
     let limit = f64::from(BAUD) / 10.0;
     let secs = stats.streaming_time.as_secs_f64();
     let bps = stats.bytes_sent as f64 / secs;
     println!(
         "10,000 lines at {BAUD} baud: {} bytes in {secs:.2} s = {bps:.0} bytes/s, {:.1}% of the {limit:.0} bytes/s \
-         limit; {:.0} lines/s; at most {} bytes in flight (wall {wall:.1} s with the handshake)",
+         limit; {:.0} lines/s; at most {} bytes in flight; {} status reports (5 Hz polls), the fullest receive \
+         buffer {} of {RX_BUFFER_BYTES} bytes (wall {wall:.1} s with the handshake)",
         stats.bytes_sent,
         100.0 * bps / limit,
         stats.lines_sent as f64 / secs,
-        stats.max_in_flight
+        stats.max_in_flight,
+        tap.reports,
+        tap.max_used
     );
 }
 
