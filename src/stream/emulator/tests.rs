@@ -405,7 +405,7 @@ fn jogging_follows_grbl() {
 }
 
 /// A stock controller with a touch plate at machine Z `plate`.
-fn with_plate(plate: Option<f64>) -> Controller {
+pub(super) fn with_plate(plate: Option<f64>) -> Controller {
     let mut c = Controller::new(&EmulatorConfig {
         probe_plate_z_mm: plate,
         ..EmulatorConfig::default()

@@ -3,7 +3,7 @@
 //! chord by chord with the `ok` after the last, a program end answered once its motion has run, and a probe
 //! in a block with spindle and coolant words.
 
-use super::tests::{ctl, send};
+use super::tests::{ctl, send, with_plate};
 use super::*;
 
 /// Run `seconds` of simulated time in 10 ms steps; everything the controller said meanwhile.
@@ -212,11 +212,7 @@ fn a_program_pause_holds_until_a_cycle_start() {
 /// runs alone and stops at the plate (it used to run as plain motion, through the plate).
 #[test]
 fn a_probe_with_spindle_and_coolant_words_still_probes() {
-    let mut c = Controller::new(&EmulatorConfig {
-        probe_plate_z_mm: Some(-5.0),
-        ..EmulatorConfig::default()
-    });
-    c.take_output();
+    let mut c = with_plate(Some(-5.0));
     assert_eq!(send(&mut c, "G0X5\n"), "ok\r\n");
     assert_eq!(send(&mut c, "M3S1000M8G38.2Z-10F120\n"), "");
     let out = run(&mut c, 10.0);
