@@ -179,12 +179,28 @@ impl Arc {
         (t <= 1.0).then(|| (t, self.point_at(from, t)))
     }
 
+    /// How many chords GRBL's `mc_arc` runs the arc from `from` with, for its arc tolerance `tol_mm` (`$12`):
+    /// `⌊|θ·r/2| / √(tol·(2r − tol))⌋`, 0 meaning one straight move to the end (GRBL counts in 16 bits, so
+    /// at most 65535).
+    #[must_use]
+    pub fn grbl_chords(&self, from: P3, tol_mm: f64) -> usize {
+        let r = self.radius(from);
+        let per = (tol_mm * (2.0 * r - tol_mm)).sqrt();
+        if per > 0.0 {
+            ((0.5 * self.sweep(from).1 * r).abs() / per)
+                .floor()
+                .min(f64::from(u16::MAX)) as usize
+        } else {
+            0
+        }
+    }
+
     /// Points along the arc from `from`, chords at most `tol_mm` from it, ending exactly at `to`. The radius
     /// is that of `from` (as a controller draws it); the helical coordinate (normal to the plane) moves
     /// linearly.
     pub fn points(&self, from: P3, tol_mm: f64) -> Vec<P3> {
         let r = self.radius(from);
-        let (_, travel) = self.sweep(from);
+        let (t0, travel) = self.sweep(from);
         // chord of angle φ misses the arc by r(1 − cos(φ/2))
         let step = if r > tol_mm && tol_mm > 0.0 {
             2.0 * (1.0 - tol_mm / r).acos()
@@ -193,7 +209,6 @@ impl Arc {
         };
         let k = (travel.abs() / step.max(1e-6)).ceil().clamp(1.0, 1e5) as usize;
         let (a, b, n) = self.plane.axes();
-        let (t0, _) = self.sweep(from);
         let mut out = Vec::with_capacity(k);
         for i in 1..k {
             let t = t0 + travel * i as f64 / k as f64;

@@ -545,21 +545,13 @@ impl Controller {
         Ok((!blocks.is_empty()).then_some(blocks))
     }
 
-    /// GRBL's `mc_arc`: the arc from the parser position as `n` chords whose ends lie on it,
-    /// `n = ⌊|θ·r/2| / √(tol·(2r − tol))⌋` with `tol` = `$12`, each a linear block at `feed_mm_min` (the last
-    /// ends exactly at the arc's end). GRBL rotates the radius vector in single precision with a correction
-    /// every 12 chords; the ends here are exact, within 10⁻⁶ mm of it. `n` is capped at GRBL's 16-bit count.
+    /// GRBL's `mc_arc`: the arc from the parser position as its [`Arc::grbl_chords`] chords for `$12`, ends on
+    /// the arc, each a linear block at `feed_mm_min` (the last ends exactly at the arc's end). GRBL rotates the
+    /// radius vector in single precision with a correction every 12 chords; the ends here are exact, within
+    /// 10⁻⁶ mm of it.
     fn arc_chords(&self, arc: &Arc, feed_mm_min: f64, line: u32) -> Moves {
         let from = self.parser_pos;
-        let (_, travel) = arc.sweep(from);
-        let r = arc.radius(from);
-        let tol = self.setting(12);
-        let per = (tol * (2.0 * r - tol)).sqrt();
-        let count = if per > 0.0 {
-            ((0.5 * travel * r).abs() / per).floor().min(f64::from(u16::MAX)) as usize
-        } else {
-            0
-        };
+        let count = arc.grbl_chords(from, self.setting(12));
         let mut blocks = Moves::with_capacity(count.max(1));
         let mut at = from;
         for i in 1..count {

@@ -88,19 +88,13 @@ pub(super) fn arc_of(l: &Line, start: [f64; 3]) -> Option<Arc> {
 /// GRBL's default `$12`, mm.
 pub const DEFAULT_ARC_TOLERANCE_MM: f64 = 0.002;
 
-/// How far inside `arc` (from `from`) the chords GRBL's `mc_arc` runs it with pass at most, mm: `n =
-/// ⌊|θ·r/2| / √(tol·(2r − tol))⌋` chords (one when `n` is 0) of angle `θ/n`, each missing the arc by
-/// `r(1 − cos(θ/2n))` — at least `tol` once `n` ≥ 1 (the floor makes the chords longer), up to 4× it.
+/// How far inside `arc` (from `from`) the chords GRBL's `mc_arc` runs it with pass at most, mm: `n` chords
+/// ([`Arc::grbl_chords`], one when that is 0) of angle `θ/n`, each missing the arc by `r(1 − cos(θ/2n))` —
+/// at least `tol` once `n` ≥ 1 (the floor makes the chords longer), up to 4× it.
 pub fn chord_sagitta_mm(arc: &Arc, from: [f64; 3], tol: f64) -> f64 {
-    let r = arc.radius(from);
     let theta = arc.sweep(from).1.abs();
-    let per = (tol * (2.0 * r - tol)).sqrt();
-    let n = if per > 0.0 {
-        ((0.5 * theta * r) / per).floor().max(1.0)
-    } else {
-        1.0
-    };
-    r * (1.0 - (theta / (2.0 * n)).min(std::f64::consts::PI).cos())
+    let n = arc.grbl_chords(from, tol).max(1) as f64;
+    arc.radius(from) * (1.0 - (theta / (2.0 * n)).min(std::f64::consts::PI).cos())
 }
 
 /// Where `p` lies along moving line `l` from `a` to `b`: the fraction of the way, the point of the path
