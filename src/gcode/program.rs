@@ -122,42 +122,45 @@ pub struct Line {
 }
 
 impl Line {
+    /// The program-flow word GRBL acts on in this block: `M0` (a pause) or `M2`/`M30` (the end), as 0, 2 or
+    /// 30. `M1`, the optional stop, GRBL 1.1 parses and ignores (`case 1: break;` in `gcode.c`): no wait, no
+    /// pause.
+    fn program_flow(&self) -> Option<i64> {
+        let ws = words(&self.block).ok()?;
+        ws.iter()
+            .filter(|w| w.letter == 'M' && w.value.fract() == 0.0)
+            .map(|w| w.value as i64)
+            .find(|m| matches!(m, 0 | 2 | 30))
+    }
+
     /// GRBL may run this line's motion, in part or whole, before it answers it: an arc (`mc_arc` plans it
-    /// chord by chord and the `ok` comes after the last) or a move in a block with `M0`, `M1`, `M2` or
-    /// `M30` (the program flow waits for the motion to finish before the `ok`). So at a stop the oldest
-    /// unanswered line may have run when it is one of these.
+    /// chord by chord and the `ok` comes after the last) or a move in a block with `M0`, `M2` or `M30` (the
+    /// program flow waits for the motion to finish before the `ok`). So at a stop the oldest unanswered line
+    /// may have run when it is one of these.
     #[must_use]
     pub fn answered_after_its_motion(&self) -> bool {
         let arc = matches!(self.motion, Some(MotionMode::ArcCw | MotionMode::ArcCcw));
-        let flow = words(&self.block).is_ok_and(|ws| {
-            ws.iter()
-                .any(|w| w.letter == 'M' && matches!(w.value as i64, 0 | 1 | 2 | 30))
-        });
-        self.kind == LineKind::Gcode && self.moves && (arc || flow)
+        self.kind == LineKind::Gcode && self.moves && (arc || self.program_flow().is_some())
     }
 
     /// The line holds `M0`, GRBL's program pause: once its motion has run the controller holds (`Hold:0`)
     /// until a cycle start, and answers it after that.
     #[must_use]
     pub fn pauses(&self) -> bool {
-        self.kind == LineKind::Gcode
-            && words(&self.block).is_ok_and(|ws| ws.iter().any(|w| w.letter == 'M' && w.value == 0.0))
+        self.kind == LineKind::Gcode && self.program_flow() == Some(0)
     }
 
     /// GRBL answers this line only once the planner has emptied (`protocol_buffer_synchronize`): a dwell,
-    /// a program stop or end, a spindle state change or a speed change while it runs, a coolant change.
-    /// Its `ok`, received before any reset, therefore proves that every line planned before it executed.
+    /// a program pause or end (not `M1`, which GRBL ignores), a spindle state change or a speed change
+    /// while it runs, a coolant change. Its `ok`, received before any reset, therefore proves that every
+    /// line planned before it executed.
     #[must_use]
     pub fn synchronises(&self) -> bool {
         let (b, a) = (&self.before, &self.after);
         let spindle = b.spindle != a.spindle || (a.spindle != Spindle::Off && b.spindle_rpm != a.spindle_rpm);
         let coolant = b.mist != a.mist || b.flood != a.flood;
-        let word = words(&self.block).is_ok_and(|ws| {
-            ws.iter().any(|w| {
-                (w.letter == 'G' && w.value == 4.0) || (w.letter == 'M' && matches!(w.value as i64, 0 | 1 | 2 | 30))
-            })
-        });
-        self.kind == LineKind::Gcode && (spindle || coolant || word)
+        let dwell = words(&self.block).is_ok_and(|ws| ws.iter().any(|w| w.letter == 'G' && w.value == 4.0));
+        self.kind == LineKind::Gcode && (spindle || coolant || dwell || self.program_flow().is_some())
     }
 
     /// The text sent for this line: the cleaned block, prefixed with `N<number>` when `numbered`.
@@ -518,6 +521,21 @@ mod tests {
 
     fn prog(text: &str) -> Program {
         Program::parse(Path::new("t.nc"), text, 0, true).unwrap()
+    }
+
+    /// GRBL 1.1 waits for the planner at `M0`, `M2`, `M30` and `G4`, and ignores `M1` (`case 1: break;`):
+    /// an `M1`'s `ok` proves nothing about the lines before it. `M0` pauses; a move with `M2` or an arc is
+    /// answered after its motion.
+    #[test]
+    fn program_flow_as_grbl_reads_it() {
+        let p = prog("G21G90\nM0\nM1\nM30\nG4P1\nG1X1F100M2\nG1X2\nG2X4I1J0\n");
+        let sync: Vec<bool> = (2..=7).map(|n| p.line(n).unwrap().synchronises()).collect();
+        assert_eq!(sync, [true, false, true, true, true, false]);
+        assert!(p.line(2).unwrap().pauses() && !p.line(3).unwrap().pauses() && !p.line(4).unwrap().pauses());
+        let after: Vec<bool> = (5..=8)
+            .map(|n| p.line(n).unwrap().answered_after_its_motion())
+            .collect();
+        assert_eq!(after, [false, true, false, true]);
     }
 
     #[test]
