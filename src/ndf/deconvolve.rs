@@ -16,6 +16,9 @@ use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
 use serde::{Deserialize, Serialize};
 
+/// Cells per partial sum of an iteration's change: fixed, so the sums do not depend on the schedule.
+const SUM_CHUNK: usize = 4096;
+
 /// Smallest even length ≥ `n` whose only prime factors are 2, 3 and 5 (fast for rustfft).
 pub fn fast_len(n: usize) -> usize {
     let mut m = n.max(2);
@@ -177,16 +180,24 @@ impl LucyRichardson {
                 .zip(observed.par_iter().zip(self.est.par_iter()))
                 .for_each(|(r, (o, e))| *r = if *e > eps { o / e } else { 0.0 });
             self.conv.convolve(&self.ratio, &mut self.corr, true);
+            // summed per fixed chunk, then the chunks in order: the same sums whatever the threads do
+            // (a rayon `reduce` pairs partial sums as the work was stolen, and moved the last digits)
             let (change, total) = estimate
-                .par_iter_mut()
-                .zip(self.corr.par_iter())
-                .map(|(d, c)| {
-                    let new = (*d * c.max(0.0)).max(0.0);
-                    let ch = (new - *d).abs();
-                    *d = new;
-                    (ch, new)
+                .par_chunks_mut(SUM_CHUNK)
+                .zip(self.corr.par_chunks(SUM_CHUNK))
+                .map(|(ds, cs)| {
+                    let mut s = (0.0, 0.0);
+                    for (d, c) in ds.iter_mut().zip(cs) {
+                        let new = (*d * c.max(0.0)).max(0.0);
+                        s.0 += (new - *d).abs();
+                        s.1 += new;
+                        *d = new;
+                    }
+                    s
                 })
-                .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+                .collect::<Vec<_>>()
+                .into_iter()
+                .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
             report.iterations = it + 1;
             report.last_change = if total > 0.0 { change / total } else { 0.0 };
             if tolerance > 0.0 && report.last_change < tolerance {

@@ -13,8 +13,8 @@
 //! grid.
 
 use crate::brdf::{luminance, Brdf};
-use crate::geometry::{from_half_diff, slope_to_normal};
-use crate::slope::{SlopeDomain, SlopeGrid, SmithTable};
+use crate::geometry::{from_half_diff, slope_to_normal, Vec3};
+use crate::slope::{SlopeDomain, SlopeGrid, SmithTable, TableDirection};
 use serde::{Deserialize, Serialize};
 
 /// How the half-angle distribution is read off a BRDF.
@@ -63,40 +63,38 @@ pub fn half_angle_density(brdf: &Brdf, domain: SlopeDomain, cfg: &HalfAngleConfi
         g.normalise();
         return (g, Source::MeasuredNdf);
     }
-    let estimate = |smith: Option<&SmithTable>| -> SlopeGrid {
-        let mut g = SlopeGrid::from_fn(domain, |p, q| {
-            let wm = slope_to_normal(p, q);
-            reflectance_d(brdf, &wm, cfg, smith) * wm.z.powi(4)
-        });
-        g.normalise();
-        g
-    };
-    let mut g = estimate(None);
+    let samples = RetroSamples::new(brdf, domain, cfg);
+    let mut g = samples.estimate(None);
     for _ in 0..cfg.masking_iterations {
         let table = SmithTable::new(&g, 64, 32);
-        g = estimate(Some(&table));
+        g = samples.estimate(Some(&table));
     }
     (g, Source::Reflectance)
 }
 
-/// The unnormalised `D̃(wm)` read off the reflectance in the near-retro configuration (module
-/// documentation), divided by the masking of `smith` when given.
-fn reflectance_d(brdf: &Brdf, wm: &crate::geometry::Vec3, cfg: &HalfAngleConfig, smith: Option<&SmithTable>) -> f64 {
+/// Calls `visit(f·4·cosθi·cosθo, wi, wo)` for each near-retro sample of the half vector `wm` (module
+/// documentation) whose `wi` and `wo` are above the horizon: the reflectance with the masking left out.
+fn for_each_retro_sample(brdf: &Brdf, wm: &Vec3, cfg: &HalfAngleConfig, mut visit: impl FnMut(f64, &Vec3, &Vec3)) {
     let theta_d = cfg.theta_d_deg.to_radians();
     let k = cfg.phi_d_samples.max(1);
     let theta_h = wm.z.min(1.0).acos();
     let phi_h = wm.y.atan2(wm.x);
-    let (mut acc, mut n) = (0.0, 0usize);
     for s in 0..k {
         let phi_d = (s as f64 + 0.5) / k as f64 * std::f64::consts::TAU;
         let (wi, wo) = from_half_diff(theta_h, phi_h, theta_d, phi_d);
         if wi.z <= 0.0 || wo.z <= 0.0 {
             continue;
         }
-        let f = luminance(&brdf.eval(&wi, &wo));
-        let g = smith.map_or(1.0, |t| t.g1(&wi) * t.g1(&wo));
+        visit(luminance(&brdf.eval(&wi, &wo)) * 4.0 * wi.z * wo.z, &wi, &wo);
+    }
+}
+
+/// The mean of `values` divided by their masking (samples whose masking is 0 left out), floored at 0.
+fn masked_mean(values: impl Iterator<Item = (f64, f64)>) -> f64 {
+    let (mut acc, mut n) = (0.0, 0usize);
+    for (f, g) in values {
         if g > 0.0 {
-            acc += f * 4.0 * wi.z * wo.z / g;
+            acc += f / g;
             n += 1;
         }
     }
@@ -104,6 +102,99 @@ fn reflectance_d(brdf: &Brdf, wm: &crate::geometry::Vec3, cfg: &HalfAngleConfig,
         (acc / n as f64).max(0.0)
     } else {
         0.0
+    }
+}
+
+/// The unnormalised `D̃(wm)` read off the reflectance in the near-retro configuration (module
+/// documentation), without the masking correction.
+fn reflectance_d(brdf: &Brdf, wm: &Vec3, cfg: &HalfAngleConfig) -> f64 {
+    let (mut acc, mut n) = (0.0, 0usize);
+    for_each_retro_sample(brdf, wm, cfg, |f, _, _| {
+        acc += f;
+        n += 1;
+    });
+    if n > 0 {
+        (acc / n as f64).max(0.0)
+    } else {
+        0.0
+    }
+}
+
+/// One near-retro sample, kept across the masking fixed point: the reflectance does not change from one
+/// round to the next, only the masking it is divided by, so the BRDF is evaluated once per sample.
+#[derive(Clone, Copy)]
+struct RetroSample {
+    /// `f·4·cosθi·cosθo`.
+    value: f64,
+    wi: TableDirection,
+    wo: TableDirection,
+}
+
+/// Every cell's near-retro samples (row-major, `start[c]..start[c + 1]` for cell `c`) and `cos⁴θm`.
+struct RetroSamples {
+    domain: SlopeDomain,
+    samples: Vec<RetroSample>,
+    start: Vec<usize>,
+    cos4: Vec<f64>,
+}
+
+impl RetroSamples {
+    fn new(brdf: &Brdf, domain: SlopeDomain, cfg: &HalfAngleConfig) -> Self {
+        use rayon::prelude::*;
+        let rows: Vec<(Vec<RetroSample>, Vec<usize>, Vec<f64>)> = (0..domain.ny)
+            .into_par_iter()
+            .map(|j| {
+                let q = domain.q_at(j);
+                let (mut samples, mut counts, mut cos4) = (vec![], vec![], vec![]);
+                for i in 0..domain.nx {
+                    let wm = slope_to_normal(domain.p_at(i), q);
+                    let before = samples.len();
+                    for_each_retro_sample(brdf, &wm, cfg, |value, wi, wo| {
+                        samples.push(RetroSample {
+                            value,
+                            wi: TableDirection::of(wi),
+                            wo: TableDirection::of(wo),
+                        })
+                    });
+                    counts.push(samples.len() - before);
+                    cos4.push(wm.z.powi(4));
+                }
+                (samples, counts, cos4)
+            })
+            .collect();
+        let mut out = Self {
+            domain,
+            samples: vec![],
+            start: vec![0],
+            cos4: vec![],
+        };
+        for (samples, counts, cos4) in rows {
+            out.samples.extend(samples);
+            for c in counts {
+                out.start.push(out.start.last().copied().unwrap_or(0) + c);
+            }
+            out.cos4.extend(cos4);
+        }
+        out
+    }
+
+    /// The distribution divided by the masking of `smith` (none: 1), normalised.
+    fn estimate(&self, smith: Option<&SmithTable>) -> SlopeGrid {
+        use rayon::prelude::*;
+        let mut g = SlopeGrid {
+            domain: self.domain,
+            density: vec![0.0; self.domain.len()],
+        };
+        g.density.par_iter_mut().enumerate().for_each(|(c, v)| {
+            let cell = &self.samples[self.start[c]..self.start[c + 1]];
+            let d = masked_mean(
+                cell.iter()
+                    .map(|s| (s.value, smith.map_or(1.0, |t| t.g1_at(s.wi) * t.g1_at(s.wo)))),
+            );
+            *v = d * self.cos4[c];
+        });
+        g.normalise();
+        g
     }
 }
 
@@ -117,15 +208,15 @@ const HEMISPHERE_CELLS: (usize, usize) = (900, 360);
 /// without the masking correction (masking only lowers `f` near grazing, so this understates what
 /// escapes).
 pub fn mass_beyond_grid(brdf: &Brdf, domain: SlopeDomain, cfg: &HalfAngleConfig) -> f64 {
-    if brdf.known_ndf(&crate::geometry::Vec3::new(0.0, 0.0, 1.0)).is_some() {
+    if brdf.known_ndf(&Vec3::new(0.0, 0.0, 1.0)).is_some() {
         mass_outside(domain, |wm| brdf.known_ndf(wm).unwrap_or(0.0).max(0.0))
     } else {
-        mass_outside(domain, |wm| reflectance_d(brdf, wm, cfg, None))
+        mass_outside(domain, |wm| reflectance_d(brdf, wm, cfg))
     }
 }
 
 /// `1 − ∫_grid D cosθ dω / ∫_hemisphere D cosθ dω` for a distribution `d(wm)` (see [`mass_beyond_grid`]).
-fn mass_outside(domain: SlopeDomain, d: impl Fn(&crate::geometry::Vec3) -> f64 + Sync) -> f64 {
+fn mass_outside(domain: SlopeDomain, d: impl Fn(&Vec3) -> f64 + Sync) -> f64 {
     use rayon::prelude::*;
     let (nt, np) = HEMISPHERE_CELLS;
     let (dt, dp) = (
@@ -141,7 +232,7 @@ fn mass_outside(domain: SlopeDomain, d: impl Fn(&crate::geometry::Vec3) -> f64 +
             for j in 0..np {
                 let ph = (j as f64 + 0.5) * dp;
                 let (sp, cp) = ph.sin_cos();
-                let wm = crate::geometry::Vec3::new(st * cp, st * sp, ct);
+                let wm = Vec3::new(st * cp, st * sp, ct);
                 let m = d(&wm) * ct * st * dt * dp;
                 total += m;
                 let (p, q) = (-wm.x / ct, -wm.y / ct);
@@ -196,7 +287,7 @@ mod tests {
         let exact = 1.0 - libm::erf(t / 0.5).powi(2);
         let brdf = Brdf::parse("beckmann:alpha=0.5").unwrap();
         let cfg = HalfAngleConfig::default();
-        let got = mass_outside(square(t), |wm| reflectance_d(&brdf, wm, &cfg, None));
+        let got = mass_outside(square(t), |wm| reflectance_d(&brdf, wm, &cfg));
         assert!(got <= exact + 1e-3 && got > exact - 0.03, "{got} against {exact}");
         // a model whose NDF is known uses it: α = 5 on the default 60° grid escapes erf(√3/5)² of its mass
         let wide = Brdf::parse("beckmann:alpha=5").unwrap();
