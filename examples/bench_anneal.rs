@@ -54,6 +54,33 @@ fn main() {
         }
         return;
     }
+    if std::env::args().nth(1).as_deref() == Some("sweeps") {
+        println!("sweeps | energy E, rms step µm, C, valleys, relief µm (means over seeds 1–10), s per anneal");
+        for sweeps in [1250, 2500, 5000, 10000, 20000] {
+            let mut sum = [0.0; 6];
+            for seed in 1..=10 {
+                let mut cfg = tile_cfg(12, seed, 1.0, 0.0);
+                cfg.anneal.sweeps = sweeps;
+                let t0 = std::time::Instant::now();
+                let t = facets::run(&cfg, &n.target).unwrap();
+                let (lo, hi) = t.heightfield.range();
+                let row = [
+                    t.anneal.energy.total(),
+                    t.seams.rms_um,
+                    t.anneal.energy.C,
+                    t.anneal.energy.valleys,
+                    (hi - lo) * 1000.0,
+                    t0.elapsed().as_secs_f64(),
+                ];
+                sum.iter_mut().zip(row).for_each(|(s, r)| *s += r / 10.0);
+            }
+            println!(
+                "{sweeps:6} | {:.4} {:6.2} {:.4} {:5.1} {:6.0} {:.2}",
+                sum[0], sum[1], sum[2], sum[3], sum[4], sum[5]
+            );
+        }
+        return;
+    }
     for side in [12usize, 32] {
         for (sw, rw) in [(0.0, 0.0), (1.0, 0.0), (1.0, 1.0)] {
             let t0 = std::time::Instant::now();

@@ -191,10 +191,12 @@ pub fn run(
     let seeds: Vec<u64> = (0..cfg.arrangements as u64)
         .map(|k| fcfg.seed.wrapping_add(k.wrapping_mul(SEED_STRIDE)))
         .collect();
+    // the facets' slopes do not depend on the seed: sampled once, arranged from each seed
+    let sites = facets::sites(fcfg, &aim)?;
     let candidates: Vec<(Tile, Round)> = seeds
         .par_iter()
         .map(|&seed| {
-            let tile = facets::run(&FacetsConfig { seed, ..*fcfg }, &aim)?;
+            let tile = facets::run_from(&FacetsConfig { seed, ..*fcfg }, &sites)?;
             let round = evaluate(1, &tile, input, cone_tan, [1.0, 1.0]);
             Ok((tile, round))
         })

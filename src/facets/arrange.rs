@@ -97,6 +97,9 @@ pub struct Arrangement {
     col_q: Vec<f64>,
     /// Cyclic neighbours of each position: right, up, left, down (no division in the annealer's loop).
     nbr: Vec<[u32; 4]>,
+    /// Column and row of each position (a division and a remainder cost more than the rest of a proposal's
+    /// index arithmetic).
+    xy: Vec<(usize, usize)>,
     /// ψ, ζ of S and R, present only when a weight is non-zero.
     terms: Option<Box<StepTerms>>,
 }
@@ -128,6 +131,7 @@ impl Arrangement {
                     .map(|v| v as u32)
                 })
                 .collect(),
+            xy: (0..w * h).map(|k| (k % w, k / w)).collect(),
             terms: None,
         };
         a.recompute_sums();
@@ -198,7 +202,7 @@ impl Arrangement {
     }
 
     /// (C, V-count) of the x-edge from `k` to its right neighbour.
-    #[inline]
+    #[inline(always)]
     fn x_edge(&self, k: usize) -> (f64, f64) {
         let r = self.right(k);
         let dq = self.q[r] - self.q[k];
@@ -206,7 +210,7 @@ impl Arrangement {
     }
 
     /// (C, V-count) of the y-edge from `k` to its upper neighbour.
-    #[inline]
+    #[inline(always)]
     fn y_edge(&self, k: usize) -> (f64, f64) {
         let u = self.up(k);
         let dp = self.p[u] - self.p[k];
@@ -231,6 +235,7 @@ impl Arrangement {
     }
 
     /// The edges touched by positions `a` and `b`: x-edges and y-edges by their start position, deduplicated.
+    #[inline(always)]
     fn touched(&self, a: usize, b: usize) -> ([usize; 4], [usize; 4], usize, usize) {
         let mut xs = [0usize; 4];
         let mut ys = [0usize; 4];
@@ -252,6 +257,7 @@ impl Arrangement {
         (xs, ys, nx, ny)
     }
 
+    #[inline(always)]
     fn local(&self, xs: &[usize], ys: &[usize]) -> f64 {
         let mut s = 0.0;
         for &k in xs {
@@ -273,13 +279,35 @@ impl Arrangement {
         }
         let (xs, ys, nx, ny) = self.touched(a, b);
         let before = self.local(&xs[..nx], &ys[..ny]);
-        let (ya, yb, xa, xb) = (a / self.w, b / self.w, a % self.w, b % self.w);
+        let ((xa, ya), (xb, yb)) = (self.xy[a], self.xy[b]);
         let i_before = self.row_p[ya].powi(2)
             + if yb != ya { self.row_p[yb].powi(2) } else { 0.0 }
             + self.col_q[xa].powi(2)
             + if xb != xa { self.col_q[xb].powi(2) } else { 0.0 };
+        let d_terms = self.exchange(a, b);
+        let i_after = self.row_p[ya].powi(2)
+            + if yb != ya { self.row_p[yb].powi(2) } else { 0.0 }
+            + self.col_q[xa].powi(2)
+            + if xb != xa { self.col_q[xb].powi(2) } else { 0.0 };
+        self.local(&xs[..nx], &ys[..ny]) - before + i_after - i_before + d_terms
+    }
+
+    /// Undo the swap of `a` and `b` just made by [`Arrangement::swap`] (the annealer's rejection): the same
+    /// state changes as swapping them again, without working out the energy change, which is minus the
+    /// swap's.
+    pub fn undo(&mut self, a: usize, b: usize) {
+        if a != b {
+            self.exchange(a, b);
+        }
+    }
+
+    /// Exchange the facets at `a ≠ b`, keeping the row and column sums and the step terms; returns the step
+    /// terms' energy change.
+    #[inline]
+    fn exchange(&mut self, a: usize, b: usize) -> f64 {
+        let ((xa, ya), (xb, yb)) = (self.xy[a], self.xy[b]);
         let (dp, dq) = (self.p[b] - self.p[a], self.q[b] - self.q[a]);
-        let d_terms = self.terms.as_mut().map_or(0.0, |t| t.swap(a, b, dp, dq));
+        let d_terms = self.terms.as_mut().map_or(0.0, |t| t.swap((xa, ya), (xb, yb), dp, dq));
         self.row_p[ya] += dp;
         self.row_p[yb] -= dp;
         self.col_q[xa] += dq;
@@ -287,11 +315,7 @@ impl Arrangement {
         self.p.swap(a, b);
         self.q.swap(a, b);
         self.index.swap(a, b);
-        let i_after = self.row_p[ya].powi(2)
-            + if yb != ya { self.row_p[yb].powi(2) } else { 0.0 }
-            + self.col_q[xa].powi(2)
-            + if xb != xa { self.col_q[xb].powi(2) } else { 0.0 };
-        self.local(&xs[..nx], &ys[..ny]) - before + i_after - i_before + d_terms
+        d_terms
     }
 
     /// Shuffle into a uniformly random arrangement.
@@ -396,7 +420,7 @@ pub fn anneal<R: Rng>(a: &mut Arrangement, cfg: &AnnealConfig, rng: &mut R) -> A
     for _ in 0..n.min(2000) {
         let (i, j) = (rng.gen_range(0..n), rng.gen_range(0..n));
         let d = a.swap(i, j);
-        a.swap(i, j);
+        a.undo(i, j);
         if d > 0.0 {
             uphill.0 += d;
             uphill.1 += 1;
@@ -419,7 +443,7 @@ pub fn anneal<R: Rng>(a: &mut Arrangement, cfg: &AnnealConfig, rng: &mut R) -> A
             e_total += d;
             accepted += 1;
         } else {
-            a.swap(i, j);
+            a.undo(i, j);
         }
         t *= cool;
         if (step + 1) % (n as u64 * trace_every as u64) == 0 {
@@ -471,11 +495,16 @@ mod tests {
                 let d = a.swap(i, j);
                 let after = a.energy().total();
                 prop_assert!((after - before - d).abs() < 1e-9, "{} vs {}", after - before, d);
-                // the annealer's rejection: the same pair swapped back
+                // the annealer's rejection: the same pair swapped back, with its energy change worked out
+                // or by `undo`, which must leave exactly the state the swap back leaves
                 if rng.gen::<f64>() < undo {
+                    let mut undone = a.clone();
+                    undone.undo(i, j);
                     let back = a.swap(i, j);
                     prop_assert!((a.energy().total() - before).abs() < 1e-9);
                     prop_assert!((back + d).abs() < 1e-9, "{} vs {}", back, -d);
+                    prop_assert!(undone.p == a.p && undone.q == a.q && undone.index == a.index);
+                    prop_assert!(undone.row_p == a.row_p && undone.col_q == a.col_q);
                 }
             }
             // the maintained ψ = G c and ζ = G² d equal their recomputation from the slopes

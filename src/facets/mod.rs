@@ -342,14 +342,29 @@ fn machinable(ndf: &SlopeGrid, cfg: &FacetsConfig) -> Result<(SlopeGrid, f64), F
 
 /// Run the facets stage on a target NDF (`P22` slope grid).
 pub fn run(cfg: &FacetsConfig, ndf: &SlopeGrid) -> Result<Tile, FacetsError> {
+    run_from(cfg, &sites(cfg, ndf)?)
+}
+
+/// The part of the facets stage that does not depend on the seed: the machinable density and the facet
+/// slopes sampled from it (Halton points relaxed toward a CVT). Arrangements of the same facets from several
+/// seeds ([`run_from`]) share it.
+#[derive(Clone, Debug)]
+pub struct Sites {
+    /// The configuration it was sampled with (its seed and annealing aside, what [`run_from`] must be given).
+    config: FacetsConfig,
+    density: SlopeGrid,
+    steep_mass: f64,
+    sites: Vec<(f64, f64)>,
+    ks_halton: f64,
+    ks_cvt: f64,
+    lloyd: sampling::LloydReport,
+}
+
+/// The facets' slopes for `cfg` (its seed and annealing play no part).
+pub fn sites(cfg: &FacetsConfig, ndf: &SlopeGrid) -> Result<Sites, FacetsError> {
     cfg.validate()?;
     let (density, steep_mass) = machinable(ndf, cfg)?;
     let n = cfg.facets_x * cfg.facets_y;
-    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(cfg.seed);
-
-    // 1. sampling
-    let reference = sampling::random_samples(&density, n, &mut rng);
-    let ks_random = sampling::ks_distance(&density, &reference);
     let mut sites = sampling::halton_samples(&density, n);
     let ks_halton = sampling::ks_distance(&density, &sites);
     let lloyd = sampling::lloyd(
@@ -369,18 +384,52 @@ pub fn run(cfg: &FacetsConfig, ndf: &SlopeGrid) -> Result<Tile, FacetsError> {
         }
     }
     let ks_cvt = sampling::ks_distance(&density, &sites);
-    let independent = sampling::random_samples(&density, n, &mut rng);
+    Ok(Sites {
+        config: *cfg,
+        density,
+        steep_mass,
+        sites,
+        ks_halton,
+        ks_cvt,
+        lloyd,
+    })
+}
+
+/// The facets stage from its sampled slopes: the seed's baselines and test, the arrangement, the
+/// integration. `cfg` must be the configuration `sites` was sampled with, up to its seed and annealing.
+pub fn run_from(cfg: &FacetsConfig, sites: &Sites) -> Result<Tile, FacetsError> {
+    cfg.validate()?;
+    let same = FacetsConfig {
+        seed: cfg.seed,
+        anneal: cfg.anneal,
+        ..sites.config
+    };
+    if same != *cfg {
+        return Err(FacetsError::Config {
+            field: "facets",
+            reason: "differs from the configuration its facets were sampled with (beyond seed and anneal)".into(),
+        });
+    }
+    let density = &sites.density;
+    let n = cfg.facets_x * cfg.facets_y;
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(cfg.seed);
+
+    // 1. sampling: the seed's i.i.d. baseline and two-sample test against the shared CVT sites
+    let reference = sampling::random_samples(density, n, &mut rng);
+    let ks_random = sampling::ks_distance(density, &reference);
+    let mut sites_now = sites.sites.clone();
+    let independent = sampling::random_samples(density, n, &mut rng);
     let (energy_statistic, energy_p_value) =
-        sampling::energy_test(&sites, &independent, cfg.test_permutations, &mut rng);
-    let mean = sites
+        sampling::energy_test(&sites_now, &independent, cfg.test_permutations, &mut rng);
+    let mean = sites_now
         .iter()
         .fold((0.0, 0.0), |a, s| (a.0 + s.0 / n as f64, a.1 + s.1 / n as f64));
-    sites.iter_mut().for_each(|s| *s = (s.0 - mean.0, s.1 - mean.1));
+    sites_now.iter_mut().for_each(|s| *s = (s.0 - mean.0, s.1 - mean.1));
 
     // 2. arrangement
-    let slope_stats = stats_of(&sites);
+    let slope_stats = stats_of(&sites_now);
     let w_v = cfg.anneal.valley_weight * 0.5 * (slope_stats.cov[0][0] + slope_stats.cov[1][1]);
-    let mut arrangement = Arrangement::new(cfg.facets_x, cfg.facets_y, &sites, w_v);
+    let mut arrangement = Arrangement::new(cfg.facets_x, cfg.facets_y, &sites_now, w_v);
     let anneal = arrange::anneal(&mut arrangement, &cfg.anneal, &mut rng);
 
     // 3. integration and rasterisation
@@ -393,14 +442,14 @@ pub fn run(cfg: &FacetsConfig, ndf: &SlopeGrid) -> Result<Tile, FacetsError> {
         heightfield,
         slope_stats,
         sampling: SamplingStats {
-            steep_mass,
+            steep_mass: sites.steep_mass,
             ks_random,
-            ks_halton,
-            ks_cvt,
+            ks_halton: sites.ks_halton,
+            ks_cvt: sites.ks_cvt,
             energy_statistic,
             energy_p_value,
             mean_removed: [mean.0, mean.1],
-            lloyd,
+            lloyd: sites.lloyd,
         },
         anneal,
         seams,

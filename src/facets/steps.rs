@@ -292,12 +292,11 @@ impl StepTerms {
         }
     }
 
-    /// The weighted change `step_weight·δ(S/a²) + relief_weight·δ(Σz²/a²)` of swapping facets `a ≠ b`,
+    /// The weighted change `step_weight·δ(S/a²) + relief_weight·δ(Σz²/a²)` of swapping the facets at columns
+    /// and rows `a ≠ b`,
     /// where the slopes at `a` change by `(dp, dq)` and those at `b` by `(−dp, −dq)`. Call it once per swap
     /// (the caller swaps the slopes); swapping the same pair again undoes the pending change for free.
-    pub(crate) fn swap(&mut self, a: usize, b: usize, dp: f64, dq: f64) -> f64 {
-        let w = self.w;
-        let (a, b) = ((a % w, a / w), (b % w, b / w));
+    pub(crate) fn swap(&mut self, a: (usize, usize), b: (usize, usize), dp: f64, dq: f64) -> f64 {
         if let Some(pd) = &self.pending {
             if (pd.a, pd.b) == (a, b) || (pd.a, pd.b) == (b, a) {
                 let delta = pd.delta;
