@@ -45,6 +45,23 @@ pub struct SweepReport {
 
 /// Sweep `segs` with `bit` over a stock flat at `top`; returns the heights row-major (`nx × ny`) and a report.
 pub fn sweep(grid: &Grid, top: f64, bit: Shape, segs: &[Segment]) -> (Vec<f64>, SweepReport) {
+    let mut z = vec![top; grid.nx * grid.ny];
+    let report = sweep_into(grid, &mut z, top, bit, segs, |_, _| {});
+    (z, report)
+}
+
+/// Sweep `segs` with `bit` over the stock `z` as it stands (row-major `nx × ny` on `grid`, nowhere above
+/// `top`), lowering it in place, and call `lowered(i, j)` for every cell the sweep lowered. Only the tiles
+/// some segment reaches are visited, so a few moves over a large stock cost what their footprints cost.
+pub fn sweep_into(
+    grid: &Grid,
+    z: &mut [f64],
+    top: f64,
+    bit: Shape,
+    segs: &[Segment],
+    mut lowered: impl FnMut(usize, usize),
+) -> SweepReport {
+    assert_eq!(z.len(), grid.nx * grid.ny, "the stock is the grid's");
     let (tx, ty) = (grid.nx.div_ceil(TILE), grid.ny.div_ceil(TILE));
     let mut bins: Vec<Vec<u32>> = vec![vec![]; tx * ty];
     let mut sweeps: Vec<Sweep> = Vec::with_capacity(segs.len());
@@ -82,47 +99,55 @@ pub fn sweep(grid: &Grid, top: f64, bit: Shape, segs: &[Segment]) -> (Vec<f64>, 
             }
         }
     }
-    let results: Vec<(Vec<f64>, u64, Vec<usize>)> = bins
+    let stock: &[f64] = z;
+    let results: Vec<(usize, Vec<f64>, u64, Vec<usize>)> = bins
         .par_iter()
         .enumerate()
+        .filter(|(_, bin)| !bin.is_empty())
         .map(|(t, bin)| {
             let (ti, tj) = (t % tx, t / tx);
-            pulp::Arch::new().dispatch(TileSweep {
+            let (cells, swept, rapid) = pulp::Arch::new().dispatch(TileSweep {
                 grid,
-                top,
+                stock,
                 corner: (ti * TILE, tj * TILE),
                 bin,
                 sweeps: &sweeps,
                 segs,
-            })
+            });
+            (t, cells, swept, rapid)
         })
         .collect();
-    let mut z = vec![top; grid.nx * grid.ny];
     let mut report = SweepReport {
         cutting_segments: cutting,
         ..Default::default()
     };
-    for (t, (cells, swept, rapid)) in results.into_iter().enumerate() {
+    for (t, cells, swept, rapid) in results {
         let (ti, tj) = (t % tx, t / tx);
         let (ci0, cj0) = (ti * TILE, tj * TILE);
         let w = TILE.min(grid.nx - ci0);
         for (j, src) in cells.chunks(w).enumerate() {
             let dst = (cj0 + j) * grid.nx + ci0;
-            z[dst..dst + w].copy_from_slice(src);
+            for (i, (d, s)) in z[dst..dst + w].iter_mut().zip(src).enumerate() {
+                if *s < *d {
+                    *d = *s;
+                    lowered(ci0 + i, cj0 + j);
+                }
+            }
         }
         report.swept_cells += swept;
         report.rapid_cuts.extend(rapid);
     }
     report.rapid_cuts.sort_unstable();
     report.rapid_cuts.dedup();
-    (z, report)
+    report
 }
 
 /// One tile's sweep, run by `pulp` with the widest vector instructions this CPU has, so that the
 /// per-cell closed forms of [`Sweep::row`] (inlined here) take four or eight cells at a time.
 struct TileSweep<'a> {
     grid: &'a Grid,
-    top: f64,
+    /// The stock as it stands, row-major over the whole grid.
+    stock: &'a [f64],
     /// The tile's first cell, `(i, j)`.
     corner: (usize, usize),
     /// The tile's segments, in program order.
@@ -138,7 +163,7 @@ impl pulp::WithSimd for TileSweep<'_> {
     fn with_simd<S: pulp::Simd>(self, _: S) -> Self::Output {
         let Self {
             grid,
-            top,
+            stock,
             corner: (ci0, cj0),
             bin,
             sweeps,
@@ -146,7 +171,11 @@ impl pulp::WithSimd for TileSweep<'_> {
         } = self;
         let w = TILE.min(grid.nx - ci0);
         let h = TILE.min(grid.ny - cj0);
-        let mut cells = vec![top; w * h];
+        let mut cells = Vec::with_capacity(w * h);
+        for j in 0..h {
+            let k = (cj0 + j) * grid.nx + ci0;
+            cells.extend_from_slice(&stock[k..k + w]);
+        }
         let mut swept = 0u64;
         let mut rapid = vec![];
         let x_first = grid.x0 + (ci0 as f64 + 0.5) * grid.pitch;
@@ -245,6 +274,18 @@ mod tests {
                 }
             }
             assert!(rep.swept_cells > 0 && rep.cutting_segments > 0);
+            // in two halves, the second lowering the stock the first left: the same stock, and the cells the
+            // second reports lowered are exactly those it took below the first's
+            let (mut two, _) = sweep(&grid, 0.0, bit, &segs[..30]);
+            let first = two.clone();
+            let mut marked = vec![false; two.len()];
+            sweep_into(&grid, &mut two, 0.0, bit, &segs[30..], |i, j| {
+                marked[j * grid.nx + i] = true
+            });
+            assert_eq!(two, z);
+            for k in 0..z.len() {
+                assert_eq!(marked[k], two[k] < first[k], "cell {k}");
+            }
             // a rapid counts as cutting only if it lowered something when it ran
             for &k in &rep.rapid_cuts {
                 assert_eq!(segs[k].kind, SegmentKind::Rapid);

@@ -410,8 +410,24 @@ fn lift_for_rounding(pass: &mut [P3], q: f64) {
 }
 
 /// The stock the moves so far leave, on the design's `(u, v)` grid: the roughing swept by the simulator's
-/// closed-form sweep ([`crate::simulate::stock::sweep`]), so the finishing knows what material remains.
+/// closed-form sweep ([`crate::simulate::stock::sweep_into`]), so the finishing knows what material remains.
 fn stock_left(design: &raster::RotatedDesign, moves: &[Move], start: P3, bit: Shape) -> Heightfield {
+    let hf = &design.hf;
+    let mut stock = Heightfield::flat(hf.nx, hf.ny, hf.pitch_mm, false, 0.0);
+    lower_stock(design, &mut stock, moves, start, bit, |_, _| {});
+    stock
+}
+
+/// Lower `stock` (on the design's `(u, v)` grid, nowhere above 0) by what `moves` from `start` cut, calling
+/// `lowered(i, j)` for each cell they lowered.
+fn lower_stock(
+    design: &raster::RotatedDesign,
+    stock: &mut Heightfield,
+    moves: &[Move],
+    start: P3,
+    bit: Shape,
+    lowered: impl FnMut(usize, usize),
+) {
     use crate::simulate::gcode::{Segment, SegmentKind};
     let (c, s) = design.cos_sin();
     let uv = |p: P3| [p[0] * c + p[1] * s, -p[0] * s + p[1] * c, p[2]];
@@ -431,22 +447,14 @@ fn stock_left(design: &raster::RotatedDesign, moves: &[Move], start: P3, bit: Sh
             at = p;
         }
     }
-    let hf = &design.hf;
     let grid = crate::simulate::stock::Grid {
         x0: design.u0,
         y0: design.v0,
-        pitch: hf.pitch_mm,
-        nx: hf.nx,
-        ny: hf.ny,
+        pitch: stock.pitch_mm,
+        nx: stock.nx,
+        ny: stock.ny,
     };
-    let (z, _) = crate::simulate::stock::sweep(&grid, 0.0, bit, &segs);
-    Heightfield {
-        nx: hf.nx,
-        ny: hf.ny,
-        pitch_mm: hf.pitch_mm,
-        periodic: false,
-        z_mm: z,
-    }
+    crate::simulate::stock::sweep_into(&grid, &mut stock.z_mm, 0.0, bit, &segs, lowered);
 }
 
 /// Columns per block of the stock's change map ([`stock_cl_rows`]).
@@ -591,15 +599,11 @@ fn intermediate_levels(
             };
             rough::emit_level(b, &lv, &link);
         }
-        let cut_now = stock_left(design, &b.moves[m0..], at0, cutter);
         let nb = stock.nx.div_ceil(CHANGE_BLOCK);
         let mut changed = vec![false; nb * stock.ny];
-        for (k, (a, c)) in stock.z_mm.iter_mut().zip(&cut_now.z_mm).enumerate() {
-            if *c < *a {
-                *a = *c;
-                changed[(k / stock.nx) * nb + (k % stock.nx) / CHANGE_BLOCK] = true;
-            }
-        }
+        lower_stock(design, stock, &b.moves[m0..], at0, cutter, |i, j| {
+            changed[j * nb + i / CHANGE_BLOCK] = true;
+        });
         stock_cl_rows(design, stock, cutter, vs, &cols, &mut s_rows, Some(&changed));
         levels += 1;
     }
