@@ -318,6 +318,82 @@ impl SlopeGrid {
         }
         acc * d.cell_area() / w.z
     }
+
+    /// [`SlopeGrid::smith_lambda`] of several directions, eight at a time in one pass over the grid: each
+    /// direction keeps its own sum, taken over the same cells in the same order (a cell outside a
+    /// direction's run adds `+0`), so every value is bit for bit the one-direction result, at a fraction of
+    /// the cost (the one-direction sum waits on its own additions; eight independent ones fill the vector
+    /// lanes). Directions close together share most of their runs: pass them in order of angle.
+    pub fn smith_lambdas(&self, ws: &[Vec3]) -> Vec<f64> {
+        ws.chunks(LAMBDA_LANES)
+            .flat_map(|c| pulp::Arch::new().dispatch(LambdaLanes { grid: self, ws: c }))
+            .take(ws.len())
+            .collect()
+    }
+}
+
+/// Directions summed together by [`SlopeGrid::smith_lambdas`].
+const LAMBDA_LANES: usize = 8;
+
+/// Up to [`LAMBDA_LANES`] directions' `Λ`, run by `pulp` with the CPU's widest vectors.
+struct LambdaLanes<'a> {
+    grid: &'a SlopeGrid,
+    ws: &'a [Vec3],
+}
+
+impl pulp::WithSimd for LambdaLanes<'_> {
+    type Output = [f64; LAMBDA_LANES];
+    #[inline(always)]
+    fn with_simd<S: pulp::Simd>(self, _: S) -> Self::Output {
+        const L: usize = LAMBDA_LANES;
+        let d = &self.grid.domain;
+        // lanes beyond the directions given, or below the horizon, look straight up: t = −1 never counts
+        let up = Vec3::new(0.0, 0.0, 1.0);
+        let lane: [Vec3; L] = std::array::from_fn(|l| match self.ws.get(l) {
+            Some(w) if w.z > 0.0 => *w,
+            _ => up,
+        });
+        let (wx, wy, wz) = (lane.map(|w| w.x), lane.map(|w| w.y), lane.map(|w| w.z));
+        let ps: Vec<f64> = (0..d.nx).map(|i| d.p_at(i)).collect();
+        let mut acc = [0.0f64; L];
+        for j in 0..d.ny {
+            let qj = d.q_at(j);
+            let qy: [f64; L] = std::array::from_fn(|l| qj * wy[l] - wz[l]);
+            // the union of the lanes' runs (see `smith_lambda`)
+            let (mut lo, mut hi) = (d.nx, 0);
+            for l in 0..L {
+                let (a, b) = if wx[l] > 0.0 {
+                    (ps.partition_point(|p| p * wx[l] + qy[l] <= 0.0), d.nx)
+                } else if wx[l] < 0.0 {
+                    (0, ps.partition_point(|p| p * wx[l] + qy[l] > 0.0))
+                } else if qy[l] > 0.0 {
+                    (0, d.nx)
+                } else {
+                    (0, 0)
+                };
+                if a < b {
+                    lo = lo.min(a);
+                    hi = hi.max(b);
+                }
+            }
+            if lo >= hi {
+                continue;
+            }
+            let row = &self.grid.density[j * d.nx..(j + 1) * d.nx];
+            for (p, v) in ps[lo..hi].iter().zip(&row[lo..hi]) {
+                for l in 0..L {
+                    // a select, not a branch, so the lanes vectorise; v·0 = +0 leaves the sum as it is
+                    let t = p * wx[l] + qy[l];
+                    let t = if t > 0.0 { t } else { 0.0 };
+                    acc[l] += v * t;
+                }
+            }
+        }
+        std::array::from_fn(|l| match self.ws.get(l) {
+            Some(w) if w.z > 0.0 => acc[l] * d.cell_area() / w.z,
+            _ => f64::INFINITY,
+        })
+    }
 }
 
 /// Add `w` at `(p, q)` spread bilinearly over the four nearest cell centres (the transpose of
@@ -357,15 +433,21 @@ impl SmithTable {
     /// Tabulate `Λ` of `grid` at `nt` polar angles in `[0, θmax]` and `nphi` azimuths (parallel).
     pub fn new(grid: &SlopeGrid, nt: usize, nphi: usize) -> Self {
         let theta_max = 89.5f64.to_radians();
-        let lambda: Vec<f64> = (0..nt * nphi)
+        // one azimuth's polar angles together: their half-planes nest, so their runs of cells do too
+        let columns: Vec<Vec<f64>> = (0..nphi)
             .into_par_iter()
-            .map(|k| {
-                let (it, ip) = (k / nphi, k % nphi);
-                let theta = theta_max * it as f64 / (nt - 1) as f64;
+            .map(|ip| {
                 let phi = std::f64::consts::TAU * ip as f64 / nphi as f64;
-                grid.smith_lambda(&crate::geometry::spherical(theta, phi))
+                let ws: Vec<Vec3> = (0..nt)
+                    .map(|it| {
+                        let theta = theta_max * it as f64 / (nt - 1) as f64;
+                        crate::geometry::spherical(theta, phi)
+                    })
+                    .collect();
+                grid.smith_lambdas(&ws)
             })
             .collect();
+        let lambda: Vec<f64> = (0..nt * nphi).map(|k| columns[k % nphi][k / nphi]).collect();
         Self {
             nt,
             nphi,
@@ -453,6 +535,29 @@ mod tests {
         let g = SlopeGrid::from_fn(d, gaussian(0.2, 0.13, -0.07));
         let s = g.shifted(0.13, -0.07).stats();
         assert!(s.mean[0].abs() < 1e-3 && s.mean[1].abs() < 1e-3, "{:?}", s.mean);
+    }
+
+    /// Eight directions at a time give each direction's one-at-a-time sum bit for bit, below the horizon
+    /// too, and for a count that is not a multiple of eight.
+    #[test]
+    fn smith_lambdas_equal_smith_lambda_bit_for_bit() {
+        let g = SlopeGrid::from_fn(SlopeDomain::square(96, 1.5), gaussian(0.3, 0.05, -0.1));
+        let ws: Vec<Vec3> = (0..21)
+            .map(|k| {
+                let theta = (k as f64 * 4.7).to_radians();
+                crate::geometry::spherical(theta, k as f64 * 0.9)
+            })
+            .chain([
+                Vec3::new(0.3, 0.1, -0.2),
+                Vec3::new(0.0, 0.6, 0.8),
+                Vec3::new(0.6, 0.0, 0.8),
+            ])
+            .collect();
+        let many = g.smith_lambdas(&ws);
+        assert_eq!(many.len(), ws.len());
+        for (w, got) in ws.iter().zip(&many) {
+            assert_eq!(got.to_bits(), g.smith_lambda(w).to_bits(), "{w:?}");
+        }
     }
 
     #[test]
