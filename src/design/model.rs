@@ -25,12 +25,14 @@ pub fn model_pitch_mm(tile: &Tile, tool: &Shape) -> f64 {
     a / (a / want - 1e-9).ceil()
 }
 
-/// The periodic opening of `tile` by `tool` on a grid of `pitch_mm` (which must divide the facet side).
+/// The periodic opening of `tile` by `tool` on a grid of `pitch_mm` (which must divide the facet side), in
+/// single precision ([`crate::morphology::opening_f32`]: within a nanometre of the double-precision one, at
+/// twice its speed; the model's slopes are differences over a stepover of tens of micrometres).
 pub fn as_milled(tile: &Tile, tool: &Shape, pitch_mm: f64) -> Heightfield {
     let mut cfg = tile.config;
     cfg.pitch_um = pitch_mm * 1000.0;
     let mut hf = facets::rasterise(&tile.arrangement, &tile.z_mm, &cfg);
-    hf.z_mm = crate::morphology::opening(&hf.z_mm, hf.nx, hf.ny, hf.pitch_mm, true, tool);
+    hf.z_mm = crate::morphology::opening_f32(&hf.z_mm, hf.nx, hf.ny, hf.pitch_mm, true, tool);
     hf
 }
 
@@ -82,13 +84,14 @@ mod tests {
         let mut c = tile.config;
         c.pitch_um = p * 1000.0;
         let d = facets::rasterise(&tile.arrangement, &tile.z_mm, &c);
-        // an opening never cuts below the surface, and leaves facet centres (a ball fits on a plane) alone
-        assert!(o.z_mm.iter().zip(&d.z_mm).all(|(o, d)| *o >= d - 1e-12));
+        // an opening never cuts below the surface, and leaves facet centres (a ball fits on a plane) alone, to
+        // the single-precision model's nanometre
+        assert!(o.z_mm.iter().zip(&d.z_mm).all(|(o, d)| *o >= *d));
         let m = 96;
         for fy in 0..6 {
             for fx in 0..6 {
                 let (i, j) = (fx * m + m / 2, fy * m + m / 2);
-                assert!((o.at(i, j) - d.at(i, j)).abs() < 1e-9, "facet ({fx},{fy}) centre moved");
+                assert!((o.at(i, j) - d.at(i, j)).abs() < 1e-6, "facet ({fx},{fy}) centre moved");
             }
         }
         let u = unreachable_fraction(&tile, &o);
