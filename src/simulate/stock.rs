@@ -46,8 +46,20 @@ pub struct SweepReport {
 /// Sweep `segs` with `bit` over a stock flat at `top`; returns the heights row-major (`nx × ny`) and a report.
 pub fn sweep(grid: &Grid, top: f64, bit: Shape, segs: &[Segment]) -> (Vec<f64>, SweepReport) {
     let mut z = vec![top; grid.nx * grid.ny];
-    let report = sweep_into(grid, &mut z, top, bit, segs, |_, _| {});
+    let report = sweep_into(grid, &mut z, top, bit, segs, Order::Program, |_, _| {});
     (z, report)
+}
+
+/// The order in which a tile's segments are swept. The stock is the same either way (a minimum); what
+/// differs is the work, and which rapids are found cutting.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Order {
+    /// Program order: a rapid is reported when it removed material at the moment it ran.
+    Program,
+    /// The deepest segments first, so that the cells they lower let the chunks of the shallower ones be
+    /// skipped (a fifth less time on the default job's roughing). [`SweepReport::rapid_cuts`] is then
+    /// meaningless: for stock models, not for checking a program.
+    DeepestFirst,
 }
 
 /// Sweep `segs` with `bit` over the stock `z` as it stands (row-major `nx × ny` on `grid`, nowhere above
@@ -59,6 +71,7 @@ pub fn sweep_into(
     top: f64,
     bit: Shape,
     segs: &[Segment],
+    order: Order,
     mut lowered: impl FnMut(usize, usize),
 ) -> SweepReport {
     assert_eq!(z.len(), grid.nx * grid.ny, "the stock is the grid's");
@@ -98,6 +111,11 @@ pub fn sweep_into(
                 bins[tj * tx + ti].push(k as u32);
             }
         }
+    }
+    if order == Order::DeepestFirst {
+        // stable: segments at one depth keep their program order
+        bins.par_iter_mut()
+            .for_each(|bin| bin.sort_by(|x, y| sweeps[*x as usize].z_min().total_cmp(&sweeps[*y as usize].z_min())));
     }
     let stock: &[f64] = z;
     let results: Vec<(usize, Vec<f64>, u64, Vec<usize>)> = bins
@@ -200,7 +218,10 @@ impl pulp::WithSimd for TileSweep<'_> {
                     let xa = x_first + (a + c * CHUNK) as f64 * grid.pitch;
                     let xb = xa + (chunk.len() - 1) as f64 * grid.pitch;
                     let floor = sw.floor(xa, xb, y);
-                    if chunk.iter().all(|v| *v <= floor) {
+                    // the chunk's highest cell, as a branch-free fold (a short-circuiting `all` compiled to
+                    // a compare and branch per cell, a third of the sweep's time)
+                    let top = chunk.iter().fold(f64::NEG_INFINITY, |m, v| if *v > m { *v } else { m });
+                    if top <= floor {
                         continue;
                     }
                     let (_, low) = sw.row(y, xa, grid.pitch, chunk);
@@ -279,10 +300,14 @@ mod tests {
             let (mut two, _) = sweep(&grid, 0.0, bit, &segs[..30]);
             let first = two.clone();
             let mut marked = vec![false; two.len()];
-            sweep_into(&grid, &mut two, 0.0, bit, &segs[30..], |i, j| {
+            sweep_into(&grid, &mut two, 0.0, bit, &segs[30..], Order::Program, |i, j| {
                 marked[j * grid.nx + i] = true
             });
             assert_eq!(two, z);
+            // deepest first: the same stock
+            let mut deep = vec![0.0; z.len()];
+            sweep_into(&grid, &mut deep, 0.0, bit, &segs, Order::DeepestFirst, |_, _| {});
+            assert_eq!(deep, z);
             for k in 0..z.len() {
                 assert_eq!(marked[k], two[k] < first[k], "cell {k}");
             }

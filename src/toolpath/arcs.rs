@@ -144,6 +144,10 @@ fn arc(raw: &[P3], ia: usize, ib: usize, tol: f64, q: f64, plane: Plane) -> Opti
             }
         };
         sig = sig.max(s);
+        // σ only grows: past a half turn no arc passes, however the rest of the points lie
+        if sig >= l / 2.0 {
+            return None;
+        }
     }
     if !sig.is_finite() || sig.abs() >= l / 2.0 {
         return None;
