@@ -156,7 +156,9 @@ pub fn dilate<T: Sample>(
         let d2 = dx * dx + dy * dy;
         (d2 <= r * r * (1.0 + 1e-12)).then(|| -bit.profile(d2.sqrt().min(r)))
     };
-    let rows: Vec<(i64, i64, Vec<T>)> = (-mi..=mi)
+    // the underside is the same at ±dj, so rows j + dj and j − dj go through one kernel row together:
+    // max(a + k, b + k) = max(a, b) + k exactly (rounding is monotone), and half the max-plus work is left
+    let rows: Vec<(i64, i64, Vec<T>)> = (0..=mi)
         .filter_map(|dj| {
             let dy = dj as f64 * pitch;
             let first = (-mi..=mi).find(|&di| within(di, dy).is_some())?;
@@ -171,21 +173,36 @@ pub fn dilate<T: Sample>(
         .par_chunks_mut(w)
         .zip(z.par_chunks(nx))
         .for_each(|(buf, row)| pad_row(row, -(m as isize), periodic, buf));
-    let mut out = vec![T::NONE; nx * ny];
-    out.par_chunks_mut(nx).enumerate().for_each(|(j, orow)| {
-        for (dj, first, kern) in &rows {
-            let jj = j as i64 + dj;
-            let jj = if periodic {
-                jj.rem_euclid(ny as i64) as usize
-            } else if jj < 0 || jj >= ny as i64 {
-                continue;
-            } else {
-                jj as usize
-            };
-            let k0 = jj * w + (mi + first) as usize;
-            max_plus(orow, &padded[k0..k0 + nx + kern.len() - 1], kern);
+    let source = |jj: i64| -> Option<usize> {
+        if periodic {
+            Some(jj.rem_euclid(ny as i64) as usize)
+        } else {
+            (0..ny as i64).contains(&jj).then_some(jj as usize)
         }
-    });
+    };
+    let mut out = vec![T::NONE; nx * ny];
+    out.par_chunks_mut(nx).enumerate().for_each_init(
+        || vec![T::NONE; w],
+        |pair, (j, orow)| {
+            for (dj, first, kern) in &rows {
+                let (n, k0) = (nx + kern.len() - 1, (mi + first) as usize);
+                let (up, down) = (source(j as i64 + dj), source(j as i64 - dj));
+                let src: &[T] = match (up, down) {
+                    (Some(a), Some(b)) if *dj != 0 => {
+                        let (ra, rb) = (&padded[a * w + k0..a * w + k0 + n], &padded[b * w + k0..b * w + k0 + n]);
+                        pair[..n]
+                            .iter_mut()
+                            .zip(ra.iter().zip(rb))
+                            .for_each(|(p, (x, y))| *p = if *x > *y { *x } else { *y });
+                        &pair[..n]
+                    }
+                    (Some(a), _) | (None, Some(a)) => &padded[a * w + k0..a * w + k0 + n],
+                    (None, None) => continue,
+                };
+                max_plus(orow, src, kern);
+            }
+        },
+    );
     out
 }
 
