@@ -9,7 +9,7 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
-use brdfmill::stream::emulator::{Emulator, EmulatorConfig, Fault};
+use brdfmill::stream::emulator::{Emulator, EmulatorConfig, Fault, FaultAt, FaultKind};
 use brdfmill::stream::program::{LineKind, Program};
 use brdfmill::stream::serial::{Link, SerialLink};
 use brdfmill::stream::session::{self, Config, Mode, Outcome, Silent};
@@ -339,9 +339,12 @@ fn character_counting_keeps_many_short_lines_in_flight() {
 /// streamer has to hold lines back. The buffer fills and never overflows: while the planner is full no
 /// `ok` comes back, and the streamer writes until the next line does not fit, so the bytes in flight on the
 /// wire reach more than `127 − L` (L the longest line with its newline); what the controller reports in
-/// `Bf` never exceeds what is in flight (checked at every report by `replay`). How full a status report
-/// catches the buffer depends on when the 5 Hz polls land: that figure is printed here and measured by
-/// `examples/bench_stream.rs`, not asserted.
+/// `Bf` never exceeds what is in flight (checked at every report by `replay`). That the buffer fills does
+/// not rest on the streamer outrunning a real-time controller (a starved test runner might not): an
+/// injected stall holds the controller's motion until its receive buffer holds `128 − 2L` bytes (one line
+/// in flight may be out of it, waiting for planner space), which only a streamer that writes until the
+/// next line does not fit brings about (a stall that times out instead fails the test). How full a status report catches the buffer depends on when the 5 Hz polls land:
+/// that figure is printed here and measured by `examples/bench_stream.rs`, not asserted.
 #[test]
 fn a_slow_controller_fills_its_receive_buffer_without_overflow() {
     let dir = tempfile::tempdir().unwrap();
@@ -353,13 +356,25 @@ fn a_slow_controller_fills_its_receive_buffer_without_overflow() {
     }
     let prog = program(dir.path(), "slow.nc", &text);
     let expected = wire_lines(&prog);
-    let emu = emulator(115_200, 1.0, vec![]);
+    let l_max = expected.iter().map(|l| l.len() + 1).max().unwrap();
+    // from the tenth line received on, nothing moves until the receive buffer holds 128 − 2L bytes: with
+    // more than 127 − L in flight, at most one line (the one waiting for planner space, already read out
+    // of the buffer, as in GRBL) is not in it
+    let stall = Fault {
+        at: FaultAt::Received(10),
+        kind: FaultKind::Stall(u16::try_from(RX_USABLE + 1 - 2 * l_max).unwrap()),
+    };
+    let emu = emulator(115_200, 1.0, vec![stall]);
     let (outcome, calls) = stream_recorded(&emu, 115_200, &prog, &dir.path().join("j"), None);
     assert!(matches!(outcome, Outcome::Completed(_)), "{outcome:?}");
     let log = emu.log();
     assert_eq!(log.rx_overflows, 0, "{:?}", log.events);
+    assert!(
+        log.events.iter().any(|e| e.starts_with("stall released")),
+        "{:?}",
+        log.events
+    );
     let w = replay(&calls, &expected);
-    let l_max = expected.iter().map(|l| l.len() + 1).max().unwrap();
     println!(
         "slow controller: at most {} bytes in flight (bound {}), fullest receive buffer reported {} bytes over \
          {} reports",

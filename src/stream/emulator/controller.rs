@@ -43,6 +43,9 @@ pub struct Controller {
     pub(super) decel_total_s: f64,
     /// Output is held back (not lost) until this simulated time: an injected silence.
     pub(super) mute_until_s: f64,
+    /// An injected stall: no motion until the receive buffer holds this many bytes, or until this
+    /// simulated time.
+    pub(super) stall: Option<(usize, f64)>,
     pub(super) rx: VecDeque<u8>,
     pub(super) reader: LineReader,
     pub(super) waiting: Option<Waiting>,
@@ -112,6 +115,7 @@ impl Controller {
             decel_left_s: 0.0,
             decel_total_s: 0.0,
             mute_until_s: 0.0,
+            stall: None,
             rx: VecDeque::with_capacity(RX_BUFFER_BYTES),
             reader: LineReader::new(),
             waiting: None,
@@ -329,6 +333,7 @@ impl Controller {
             self.say("ok");
         }
         self.flush_motion();
+        self.stall = None;
         self.rx.clear();
         self.reader.clear();
         self.critical = false;
@@ -457,6 +462,9 @@ impl Controller {
             }
             Some(FaultKind::Disconnect) => disconnect_after = true,
             Some(FaultKind::Silence(ms)) => self.mute_until_s = self.sim_time_s + f64::from(ms) / 1000.0,
+            Some(FaultKind::Stall(bytes)) => {
+                self.stall = Some((usize::from(bytes), self.sim_time_s + super::fault::STALL_LIMIT_S));
+            }
             None => {}
         }
         if text.starts_with('$') {

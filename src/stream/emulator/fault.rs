@@ -1,5 +1,5 @@
 //! Injected faults: an `error:N` instead of running a line, an alarm (`ALARM:2` after a soft limit's
-//! controlled stop, any other code at once), a silence, or a dropped link after the line. Each fires once, on the first line that matches it (see the module
+//! controlled stop, any other code at once), a silence, a stalled planner, or a dropped link after the line. Each fires once, on the first line that matches it (see the module
 //! documentation of [`emulator`](super) for what each does to the controller).
 
 use super::controller::Controller;
@@ -35,12 +35,22 @@ pub enum FaultKind {
     Disconnect,
     /// Run the line, then send nothing (answers and reports wait) for this many simulated milliseconds.
     Silence(u32),
+    /// Run the line, then move nothing until the receive buffer holds at least this many bytes (or
+    /// [`STALL_LIMIT_S`] simulated seconds pass): the planner fills, GRBL stops taking lines, and the
+    /// stream backs up into the receive buffer whatever the speed of either side — a fill a test can
+    /// assert without a clock.
+    Stall(u16),
 }
+
+/// The longest a [`FaultKind::Stall`] holds motion, simulated seconds (so that a streamer that never fills
+/// the buffer fails its test instead of hanging it).
+pub const STALL_LIMIT_S: f64 = 60.0;
 
 impl std::str::FromStr for Fault {
     type Err = String;
-    /// `N:error[:code]`, `N:alarm[:code]`, `N:disconnect`, `N:silence[:ms]` (N a line number `N` word;
-    /// a silence of at most 65535 ms).
+    /// `N:error[:code]`, `N:alarm[:code]`, `N:disconnect`, `N:silence[:ms]`, `N:stall[:bytes]` (N a line
+    /// number `N` word; a silence of at most 65535 ms; a stall until the receive buffer holds `bytes`,
+    /// default 100).
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         let parts: Vec<&str> = s.split(':').collect();
         let n: u32 = parts
@@ -57,7 +67,12 @@ impl std::str::FromStr for Fault {
             Some("alarm") => FaultKind::Alarm(code(2)?),
             Some("disconnect") => FaultKind::Disconnect,
             Some("silence") => FaultKind::Silence(u32::from(code(5000)?)),
-            _ => return Err(format!("fault `{s}`: kind must be error, alarm, disconnect or silence")),
+            Some("stall") => FaultKind::Stall(code(100)?),
+            _ => {
+                return Err(format!(
+                    "fault `{s}`: kind must be error, alarm, disconnect, silence or stall"
+                ))
+            }
         };
         Ok(Fault {
             at: FaultAt::LineNumber(n),

@@ -27,7 +27,9 @@
 //! received): `error` answers `error:code` instead of running the line; `alarm` raises `ALARM:code` as a
 //! critical alarm (`[MSG:Reset to continue]`, nothing answered or run until a soft reset) — for code 2 the
 //! way a soft limit does, after a controlled stop with the position retained, for any other code at once;
-//! `disconnect` runs the line and then drops the link — the controller keeps executing
+//! `silence` runs the line and then holds all output back for a while; `stall` runs the line and then
+//! moves nothing until the receive buffer holds a given number of bytes (the planner fills, lines back up:
+//! a full buffer a test can assert without a clock); `disconnect` runs the line and then drops the link — the controller keeps executing
 //! what is already complete in its receive buffer and planner (a board with its own power supply), discards
 //! a partial line, and opens a new pseudo-terminal after `reconnect_delay`.
 //!

@@ -160,8 +160,23 @@ impl Controller {
         self.main_loop();
     }
 
-    /// Execute `dt` simulated seconds of the planner's blocks (unless holding or locked).
+    /// Execute `dt` simulated seconds of the planner's blocks (unless holding, stalled or locked).
     fn run_motion(&mut self, dt: f64) {
+        if let Some((bytes, until)) = self.stall {
+            if self.rx.len() < bytes && self.sim_time_s < until {
+                return;
+            }
+            let how = if self.rx.len() >= bytes {
+                "released"
+            } else {
+                "timed out"
+            };
+            self.log.events.push(format!(
+                "stall {how} with {} bytes in the receive buffer",
+                self.rx.len()
+            ));
+            self.stall = None;
+        }
         if !self.hold {
             self.execute_for(dt);
         }

@@ -210,6 +210,48 @@ fn faults_fire_once() {
     assert!("x:error".parse::<Fault>().is_err());
 }
 
+/// A stall holds motion (the planner full, lines backing up) until the receive buffer holds its bytes, or
+/// for at most its time limit; a reset ends it.
+#[test]
+fn a_stall_holds_motion_until_the_receive_buffer_fills() {
+    let stalled = || {
+        let mut c = Controller::new(&EmulatorConfig {
+            faults: vec!["1:stall:40".parse().unwrap()],
+            ..EmulatorConfig::default()
+        });
+        c.take_output();
+        assert_eq!(send(&mut c, "N1G1X1F600
+"), "ok\r\n");
+        c
+    };
+    let mut c = stalled();
+    c.advance(5.0);
+    assert!(send(&mut c, "?").contains("MPos:0.000,0.000,0.000"), "nothing moved");
+    for i in 2..16 {
+        send(&mut c, &format!("G1X{i}F600\n"));
+    }
+    assert_eq!(send(&mut c, "G1X16F600\n"), "", "the planner is full");
+    send(&mut c, "G1X17F600\nG1X18F600\nG1X19F600\n");
+    assert!(c.rx.len() < 40);
+    c.advance(1.0);
+    assert!(send(&mut c, "?").contains("MPos:0.000,0.000,0.000"), "still stalled below 40 bytes");
+    send(&mut c, "G1X20F600\nG1X21F600\nG1X22F600\n");
+    assert!(c.rx.len() >= 40);
+    c.advance(0.05);
+    assert!(!send(&mut c, "?").contains("MPos:0.000,0.000,0.000"), "released");
+    assert!(c.log.events.iter().any(|e| e.starts_with("stall released")));
+    // without the bytes, the time limit ends it
+    let mut c = stalled();
+    c.advance(fault::STALL_LIMIT_S + 1.0);
+    c.advance(0.05);
+    assert!(c.log.events.iter().any(|e| e.starts_with("stall timed out")));
+    // a reset ends it too
+    let mut c = stalled();
+    send(&mut c, "\x18");
+    assert!(c.stall.is_none());
+    assert!("2:stall:x".parse::<Fault>().is_err());
+}
+
 #[test]
 fn arcs_in_every_plane_follow_grbl() {
     let mut c = ctl();
