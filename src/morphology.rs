@@ -367,16 +367,14 @@ mod tests {
         }
     }
 
-    /// The single-precision opening is the double-precision one to within its rounding (relative heights,
-    /// a few f32 steps of 0.12 nm at 1 mm), on a faceted tile with a millimetre of relief.
-    #[test]
-    fn the_single_precision_opening_is_the_double_one_to_a_nanometre() {
+    /// A 4 × 4 tile of 1 mm facets for the target `spec`, rasterised at `pitch_um`.
+    fn tile_4x4(spec: &str, pitch_um: f64) -> facets::Tile {
         let n = ndf::run(
             &ndf::NdfConfig {
                 res: 64,
                 ..Default::default()
             },
-            &Brdf::parse("beckmann:alpha=0.3").unwrap(),
+            &Brdf::parse(spec).unwrap(),
             None,
         )
         .unwrap();
@@ -384,10 +382,17 @@ mod tests {
             facets_x: 4,
             facets_y: 4,
             facet_mm: 1.0,
-            pitch_um: 10.0,
+            pitch_um,
             ..Default::default()
         };
-        let tile = facets::run(&cfg, &n.target).unwrap();
+        facets::run(&cfg, &n.target).unwrap()
+    }
+
+    /// The single-precision opening is the double-precision one to within its rounding (relative heights,
+    /// a few f32 steps of 0.12 nm at 1 mm), on a faceted tile with a millimetre of relief.
+    #[test]
+    fn the_single_precision_opening_is_the_double_one_to_a_nanometre() {
+        let tile = tile_4x4("beckmann:alpha=0.3", 10.0);
         let hf = &tile.heightfield;
         let (lo, hi) = hf.range();
         assert!(hi - lo > 0.3, "relief {}", hi - lo);
@@ -402,23 +407,7 @@ mod tests {
 
     #[test]
     fn the_decimated_opening_stays_within_its_sampling_bound_of_the_full_one() {
-        let n = ndf::run(
-            &ndf::NdfConfig {
-                res: 64,
-                ..Default::default()
-            },
-            &Brdf::parse("beckmann:alpha=0.2").unwrap(),
-            None,
-        )
-        .unwrap();
-        let cfg = facets::FacetsConfig {
-            facets_x: 4,
-            facets_y: 4,
-            facet_mm: 1.0,
-            pitch_um: 5.0,
-            ..Default::default()
-        };
-        let tile = facets::run(&cfg, &n.target).unwrap();
+        let tile = tile_4x4("beckmann:alpha=0.2", 5.0);
         let hf = &tile.heightfield;
         let tool = Shape::Ball { diameter_mm: 0.5 };
         let full = opening(&hf.z_mm, hf.nx, hf.ny, hf.pitch_mm, true, &tool);

@@ -220,8 +220,14 @@ fn a_stall_holds_motion_until_the_receive_buffer_fills() {
             ..EmulatorConfig::default()
         });
         c.take_output();
-        assert_eq!(send(&mut c, "N1G1X1F600
-"), "ok\r\n");
+        assert_eq!(
+            send(
+                &mut c,
+                "N1G1X1F600
+"
+            ),
+            "ok\r\n"
+        );
         c
     };
     let mut c = stalled();
@@ -234,7 +240,10 @@ fn a_stall_holds_motion_until_the_receive_buffer_fills() {
     send(&mut c, "G1X17F600\nG1X18F600\nG1X19F600\n");
     assert!(c.rx.len() < 40);
     c.advance(1.0);
-    assert!(send(&mut c, "?").contains("MPos:0.000,0.000,0.000"), "still stalled below 40 bytes");
+    assert!(
+        send(&mut c, "?").contains("MPos:0.000,0.000,0.000"),
+        "still stalled below 40 bytes"
+    );
     send(&mut c, "G1X20F600\nG1X21F600\nG1X22F600\n");
     assert!(c.rx.len() >= 40);
     c.advance(0.05);
