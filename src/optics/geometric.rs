@@ -60,7 +60,7 @@ pub fn slopes(hf: &Heightfield, prefilter_um: f64, margin: usize) -> Vec<(f64, f
 /// everything wider kept (`verify::milled` explains why the milled surface is measured so).
 ///
 /// Every sample sits at a fixed offset from its cell, and bilinear interpolation is linear in the heights,
-/// so each of the two differences is one fixed stencil of weighted neighbours ([`StepoverStencil`]): a cell
+/// so each of the two differences is one fixed stencil of weighted neighbours (`StepoverStencil`): a cell
 /// costs a few dozen multiply-adds along contiguous rows instead of a dozen interpolations. Cells of a
 /// bounded grid whose stencil reaches past its edge are sampled one by one, clamped.
 pub fn stepover_slopes(hf: &Heightfield, cells: [usize; 4], angle_deg: f64, stepover_mm: f64) -> Vec<(f64, f64)> {
