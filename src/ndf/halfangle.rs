@@ -242,7 +242,10 @@ fn mass_outside(domain: SlopeDomain, d: impl Fn(&Vec3) -> f64 + Sync) -> f64 {
             }
             (inside, total)
         })
-        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
+        // added in θ order, not as rayon's `reduce` pairs them (which follows the work stealing)
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1));
     if total > 0.0 {
         (1.0 - inside / total).max(0.0)
     } else {

@@ -333,7 +333,10 @@ fn compare(sim: &Simulation, win: &Window, cells: &Interior, map_um: &mut [f32],
             }
             a
         })
-        .reduce(Acc::zero, Acc::merge)
+        // merged in row order: the sums do not depend on how the rows were stolen
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold(Acc::zero(), Acc::merge)
 }
 
 impl Deviation {

@@ -506,7 +506,10 @@ pub fn cut_and_air_mm(before: &Simulation, bit: Shape, segs: &[gcode::Segment]) 
             }
             (0.0, len)
         })
-        .reduce(|| (0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
+        // added in program order, whatever the schedule
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
 }
 
 /// Sweep each tool's segments with its own shape; the stock is the lowest of their cuts (a sweep only

@@ -459,10 +459,12 @@ fn region_radiance(
             }
             (s, n)
         })
-        .reduce(
-            || (vec![0.0; light.len()], 0),
-            |a, b| (a.0.iter().zip(&b.0).map(|(x, y)| x + y).collect(), a.1 + b.1),
-        );
+        // added in row order, whatever the schedule
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold((vec![0.0; light.len()], 0), |a, b| {
+            (a.0.iter().zip(&b.0).map(|(x, y)| x + y).collect(), a.1 + b.1)
+        });
     sum.iter().map(|s| s / n.max(1) as f64).collect()
 }
 

@@ -334,6 +334,9 @@ fn fft2_inplace(buf: &mut [Complex64], tmp: &mut [Complex64], m: usize, fft: &dy
     fft.process(tmp);
 }
 
+/// Window spectra computed together by [`fft_slice`] before they are added.
+const WINDOW_BATCH: usize = 8;
+
 /// The wave BRDF over a whole `ψ̄` slice by FFT, averaged over the configured window centres (see the
 /// module notes for the grid, ξ2 and ξ3).
 pub fn fft_slice(surf: &OpticalSurface, wi: &Vec3, cfg: &WaveConfig) -> Result<WaveSlice, WaveError> {
@@ -346,58 +349,57 @@ pub fn fft_slice(surf: &OpticalSurface, wi: &Vec3, cfg: &WaveConfig) -> Result<W
     let dpsi = lambda / (m as f64 * d);
     let half = (m / 2) as isize;
     let cut2 = (4.0 * sigma).powi(2);
-    let acc = centres
-        .par_iter()
-        .map(|&(xc, yc)| {
-            let zero = Complex64::new(0.0, 0.0);
-            let mut f = [vec![zero; m * m], vec![zero; m * m], vec![zero; m * m]];
-            let mut tmp = vec![zero; m * m];
-            for b in 0..m {
-                let dy = (b as isize - half) as f64 * d;
-                for a in 0..m {
-                    let dx = (a as isize - half) as f64 * d;
-                    let r2 = dx * dx + dy * dy;
-                    if r2 > cut2 {
-                        continue;
-                    }
-                    let w = (-r2 / (2.0 * sigma * sigma)).exp();
-                    let (h, hx, hy) = surf.eval(xc + dx, yc + dy);
-                    let e = Complex64::from_polar(w, -2.0 * PI * xi3 * h / lambda);
-                    let k = b * m + a;
-                    f[0][k] = e;
-                    f[1][k] = e * hx;
-                    f[2][k] = e * hy;
+    let one = |&(xc, yc): &(f64, f64)| {
+        let zero = Complex64::new(0.0, 0.0);
+        let mut f = [vec![zero; m * m], vec![zero; m * m], vec![zero; m * m]];
+        let mut tmp = vec![zero; m * m];
+        for b in 0..m {
+            let dy = (b as isize - half) as f64 * d;
+            for a in 0..m {
+                let dx = (a as isize - half) as f64 * d;
+                let r2 = dx * dx + dy * dy;
+                if r2 > cut2 {
+                    continue;
                 }
+                let w = (-r2 / (2.0 * sigma * sigma)).exp();
+                let (h, hx, hy) = surf.eval(xc + dx, yc + dy);
+                let e = Complex64::from_polar(w, -2.0 * PI * xi3 * h / lambda);
+                let k = b * m + a;
+                f[0][k] = e;
+                f[1][k] = e * hx;
+                f[2][k] = e * hy;
             }
-            let mut out = Vec::with_capacity(3);
-            for field in f.iter_mut() {
-                fft2_inplace(field, &mut tmp, m, fft.as_ref());
-                out.push(tmp.clone());
+        }
+        let mut out = Vec::with_capacity(3);
+        for field in f.iter_mut() {
+            fft2_inplace(field, &mut tmp, m, fft.as_ref());
+            out.push(tmp.clone());
+        }
+        let mut s = vec![0.0; m * m];
+        for b in 0..m {
+            for a in 0..m {
+                let (px, py) = ((a as isize - half) as f64 * dpsi, (b as isize - half) as f64 * dpsi);
+                let Some(wo) = outgoing(wi, px, py) else {
+                    continue;
+                };
+                let psiz = wi.z + wo.z;
+                // FFT bin of ψ̄: u = ψ̄/λ = k/(MΔ), k = index − M/2 (mod M); transposed layout
+                let (ka, kb) = ((a + m / 2) % m, (b + m / 2) % m);
+                let t = ka * m + kb;
+                let v = out[0][t] - (out[1][t] * px + out[2][t] * py) / psiz;
+                s[b * m + a] = v.norm_sqr();
             }
-            let mut s = vec![0.0; m * m];
-            for b in 0..m {
-                for a in 0..m {
-                    let (px, py) = ((a as isize - half) as f64 * dpsi, (b as isize - half) as f64 * dpsi);
-                    let Some(wo) = outgoing(wi, px, py) else {
-                        continue;
-                    };
-                    let psiz = wi.z + wo.z;
-                    // FFT bin of ψ̄: u = ψ̄/λ = k/(MΔ), k = index − M/2 (mod M); transposed layout
-                    let (ka, kb) = ((a + m / 2) % m, (b + m / 2) % m);
-                    let t = ka * m + kb;
-                    let v = out[0][t] - (out[1][t] * px + out[2][t] * py) / psiz;
-                    s[b * m + a] = v.norm_sqr();
-                }
-            }
-            s
-        })
-        .reduce(
-            || vec![0.0; m * m],
-            |mut a, b| {
-                a.iter_mut().zip(&b).for_each(|(x, y)| *x += y);
-                a
-            },
-        );
+        }
+        s
+    };
+    // a few windows at a time in parallel, added in window order: the sum does not depend on the schedule
+    // (rayon's `reduce` pairs partial sums as work is stolen) and at most a batch of spectra is held
+    let mut acc = vec![0.0; m * m];
+    for batch in centres.chunks(WINDOW_BATCH) {
+        for s in batch.par_iter().map(&one).collect::<Vec<_>>() {
+            acc.iter_mut().zip(&s).for_each(|(x, y)| *x += y);
+        }
+    }
     let norm = d.powi(4) / (PI * sigma * sigma) / centres.len() as f64;
     let spectrum: Vec<f64> = acc.iter().map(|v| v * norm).collect();
     let mut slice = WaveSlice {
