@@ -123,8 +123,6 @@ struct Wire {
     min_lines_in_flight_at_wait: usize,
     /// Status reports received while streaming.
     status_reports: usize,
-    /// The fullest receive buffer a status report showed (`128 − Bf`'s second field).
-    max_rx_used: usize,
 }
 
 /// Replay the calls of a fresh run of `expected` (wire texts of G-code lines) and check, at every step:
@@ -211,7 +209,6 @@ fn replay(calls: &[Call], expected: &[String]) -> Wire {
                             rx_used <= sent_unanswered && rx_used <= RX_USABLE,
                             "`{text}`: {rx_used} bytes in the receive buffer, {sent_unanswered} in flight"
                         );
-                        w.max_rx_used = w.max_rx_used.max(rx_used);
                     }
                 }
             }
@@ -343,13 +340,14 @@ fn character_counting_keeps_many_short_lines_in_flight() {
 /// not rest on the streamer outrunning a real-time controller (a starved test runner might not): an
 /// injected stall holds the controller's motion until its receive buffer holds `128 − 2L` bytes (one line
 /// in flight may be out of it, waiting for planner space), which only a streamer that writes until the
-/// next line does not fit brings about (a stall that times out instead fails the test). How full a status report catches the buffer depends on when the 5 Hz polls land:
-/// that figure is printed here and measured by `examples/bench_stream.rs`, not asserted.
+/// next line does not fit brings about (a stall that times out instead fails the test). Nothing here
+/// depends on the clock: how full a 5 Hz status poll catches the buffer does, and is measured by
+/// `examples/bench_stream.rs` (a controller in real time), not here.
 #[test]
 fn a_slow_controller_fills_its_receive_buffer_without_overflow() {
     let dir = tempfile::tempdir().unwrap();
-    // 100 moves of 1 mm at 1200 mm/min: 50 ms each in real time, 5 s in all; 15 in the planner and about
-    // 16 lines in the buffer, so the buffer stays full for about 3.5 s, some 17 status polls at 5 Hz.
+    // 100 moves of 1 mm at 1200 mm/min, 50 ms each, run 10× faster than real time: 5 ms a move, still
+    // slower than the link's 0.3–0.4 ms a line; the stall, not this speed, is what fills the buffer
     let mut text = String::from("G91\nG1\nF1200\n");
     for i in 0..100 {
         text += if i % 2 == 0 { "X1\n" } else { "X-1\n" };
@@ -364,7 +362,7 @@ fn a_slow_controller_fills_its_receive_buffer_without_overflow() {
         at: FaultAt::Received(10),
         kind: FaultKind::Stall(u16::try_from(RX_USABLE + 1 - 2 * l_max).unwrap()),
     };
-    let emu = emulator(115_200, 1.0, vec![stall]);
+    let emu = emulator(115_200, 10.0, vec![stall]);
     let (outcome, calls) = stream_recorded(&emu, 115_200, &prog, &dir.path().join("j"), None);
     assert!(matches!(outcome, Outcome::Completed(_)), "{outcome:?}");
     let log = emu.log();
@@ -375,14 +373,6 @@ fn a_slow_controller_fills_its_receive_buffer_without_overflow() {
         log.events
     );
     let w = replay(&calls, &expected);
-    println!(
-        "slow controller: at most {} bytes in flight (bound {}), fullest receive buffer reported {} bytes over \
-         {} reports",
-        w.max_in_flight,
-        RX_USABLE + 1 - l_max,
-        w.max_rx_used,
-        w.status_reports
-    );
     assert_eq!(w.lines, expected);
     assert_eq!(w.oks, expected.len());
     assert!(
