@@ -209,9 +209,22 @@ pub fn dilate<T: Sample>(
 /// The opening of a grid by the bit, `O = erode(dilate(h))`: the highest surface the bit can leave on `h`
 /// from above, however fine its raster (the erosion of the drop-cutter CL surface, DESIGN.md §4).
 pub fn opening(h: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &Shape) -> Vec<f64> {
-    let cl = dilate(h, nx, ny, pitch, periodic, tool, |v| v);
-    let neg: Vec<f64> = cl.iter().map(|v| -v).collect();
-    dilate(&neg, nx, ny, pitch, periodic, tool, |v| v)
+    open(h, nx, ny, pitch, periodic, tool, |v| v)
+}
+
+/// `erode(dilate(h))` in the sample type, the erosion as the negated dilation of the negated CL surface.
+fn open<T: Sample + std::ops::Neg<Output = T>>(
+    h: &[T],
+    nx: usize,
+    ny: usize,
+    pitch: f64,
+    periodic: bool,
+    tool: &Shape,
+    to_sample: impl Fn(f64) -> T,
+) -> Vec<T> {
+    let cl = dilate(h, nx, ny, pitch, periodic, tool, &to_sample);
+    let neg: Vec<T> = cl.into_iter().map(|v| -v).collect();
+    dilate(&neg, nx, ny, pitch, periodic, tool, &to_sample)
         .into_iter()
         .map(|v| -v)
         .collect()
@@ -226,13 +239,11 @@ pub fn opening_f32(h: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, 
     let top = h.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let top = if top.is_finite() { top } else { 0.0 };
     let rel: Vec<f32> = h.iter().map(|v| (v - top) as f32).collect();
-    let cl = dilate(&rel, nx, ny, pitch, periodic, tool, |v| v as f32);
-    let neg: Vec<f32> = cl.iter().map(|v| -v).collect();
     // an opening never lies below the surface; the rounding could put it a hair under, so it is held there
-    dilate(&neg, nx, ny, pitch, periodic, tool, |v| v as f32)
+    open(&rel, nx, ny, pitch, periodic, tool, |v| v as f32)
         .into_iter()
         .zip(h)
-        .map(|(v, h)| (top - f64::from(v)).max(*h))
+        .map(|(v, h)| (top + f64::from(v)).max(*h))
         .collect()
 }
 
@@ -279,44 +290,38 @@ mod tests {
     use crate::brdf::Brdf;
     use crate::{facets, ndf};
 
-    #[test]
-    fn max_plus_equals_the_direct_maximum() {
+    /// `max_plus` against the direct maximum for outputs of `n` and kernels of `w` (random, converted to the
+    /// sample type by `from`), some outputs starting at −∞.
+    fn check_max_plus<T: Sample + std::fmt::Debug>(sizes: &[(usize, usize)], seed: u64, from: impl Fn(f64) -> T) {
         use rand::{Rng, SeedableRng};
-        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
-        // outputs across the lane block boundaries, kernels from one entry to wider than the block
-        for (n, w) in [(1, 1), (15, 3), (16, 1), (17, 5), (40, 33), (63, 16), (100, 7)] {
-            let src: Vec<f64> = (0..n + w - 1).map(|_| rng.gen_range(-1.0..1.0)).collect();
-            let kernel: Vec<f64> = (0..w).map(|_| rng.gen_range(-1.0..0.0)).collect();
-            let start: Vec<f64> = (0..n)
-                .map(|k| if k % 3 == 0 { 0.5 } else { f64::NEG_INFINITY })
-                .collect();
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+        for &(n, w) in sizes {
+            let src: Vec<T> = (0..n + w - 1).map(|_| from(rng.gen_range(-1.0..1.0))).collect();
+            let kernel: Vec<T> = (0..w).map(|_| from(rng.gen_range(-1.0..0.0))).collect();
+            let start: Vec<T> = (0..n).map(|k| if k % 3 == 0 { from(0.5) } else { T::NONE }).collect();
             let mut out = start.clone();
             max_plus(&mut out, &src, &kernel);
             for i in 0..n {
-                let want = (0..w).map(|k| src[i + k] + kernel[k]).fold(start[i], f64::max);
+                let want = (0..w)
+                    .map(|k| src[i + k] + kernel[k])
+                    .fold(start[i], |m, v| if v > m { v } else { m });
                 assert_eq!(out[i], want, "n {n} w {w} at {i}");
             }
         }
     }
 
     #[test]
-    fn single_precision_max_plus_equals_the_direct_maximum() {
-        use rand::{Rng, SeedableRng};
-        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(5);
-        // across the 32-output blocks
-        for (n, w) in [(1, 1), (31, 3), (32, 1), (33, 5), (70, 41), (96, 32)] {
-            let src: Vec<f32> = (0..n + w - 1).map(|_| rng.gen_range(-1.0..1.0)).collect();
-            let kernel: Vec<f32> = (0..w).map(|_| rng.gen_range(-1.0..0.0)).collect();
-            let start: Vec<f32> = (0..n)
-                .map(|k| if k % 3 == 0 { 0.5 } else { f32::NEG_INFINITY })
-                .collect();
-            let mut out = start.clone();
-            max_plus(&mut out, &src, &kernel);
-            for i in 0..n {
-                let want = (0..w).map(|k| src[i + k] + kernel[k]).fold(start[i], f32::max);
-                assert_eq!(out[i], want, "n {n} w {w} at {i}");
-            }
-        }
+    fn max_plus_equals_the_direct_maximum() {
+        // outputs across the lane block boundaries (16 f64, 32 f32), kernels from one entry to wider than
+        // the block
+        check_max_plus(
+            &[(1, 1), (15, 3), (16, 1), (17, 5), (40, 33), (63, 16), (100, 7)],
+            3,
+            |v| v,
+        );
+        check_max_plus(&[(1, 1), (31, 3), (32, 1), (33, 5), (70, 41), (96, 32)], 5, |v| {
+            v as f32
+        });
     }
 
     #[test]

@@ -290,45 +290,53 @@ impl SlopeGrid {
     ///
     /// It follows from the projected-area identity `∫ ⟨w, m⟩⁺ D(m) dm = cosθ (1 + Λ)` with
     /// `D dm = P22 dp dq / cosθm` and `⟨w, m⟩ = (wz − p·wx − q·wy) cosθm`. The density should be normalised.
+    /// This is the definition, cell by cell; [`SmithTable`] takes its directions with
+    /// [`SlopeGrid::smith_lambdas`], which gives the same bits faster.
     pub fn smith_lambda(&self, w: &Vec3) -> f64 {
         if w.z <= 0.0 {
             return f64::INFINITY;
         }
         let d = &self.domain;
-        let ps: Vec<f64> = (0..d.nx).map(|i| d.p_at(i)).collect();
         let mut acc = 0.0;
         for j in 0..d.ny {
             let qy = d.q_at(j) * w.y - w.z;
             let row = &self.density[j * d.nx..(j + 1) * d.nx];
-            // `t(i) = p_i·wx + qy` is monotone in i (p_i increases), so the cells with t > 0 are one run: a
-            // suffix for wx > 0, a prefix for wx < 0, all or none for wx = 0. Summing only that run adds the
-            // same terms in the same order as testing every cell, for a fraction of the work.
-            let (lo, hi) = if w.x > 0.0 {
-                (ps.partition_point(|p| p * w.x + qy <= 0.0), d.nx)
-            } else if w.x < 0.0 {
-                (0, ps.partition_point(|p| p * w.x + qy > 0.0))
-            } else if w.x == 0.0 && qy > 0.0 {
-                (0, d.nx)
-            } else {
-                (0, 0)
-            };
-            for (p, v) in ps[lo..hi].iter().zip(&row[lo..hi]) {
-                acc += v * (p * w.x + qy);
+            for (i, v) in row.iter().enumerate() {
+                let t = d.p_at(i) * w.x + qy;
+                if t > 0.0 {
+                    acc += v * t;
+                }
             }
         }
         acc * d.cell_area() / w.z
     }
 
     /// [`SlopeGrid::smith_lambda`] of several directions, eight at a time in one pass over the grid: each
-    /// direction keeps its own sum, taken over the same cells in the same order (a cell outside a
-    /// direction's run adds `+0`), so every value is bit for bit the one-direction result, at a fraction of
-    /// the cost (the one-direction sum waits on its own additions; eight independent ones fill the vector
-    /// lanes). Directions close together share most of their runs: pass them in order of angle.
+    /// direction keeps its own sum, taken over the same cells in the same order (a cell it does not count
+    /// adds `+0`), so every value is bit for bit the one-direction result, at a fraction of the cost (the
+    /// one-direction sum waits on its own additions; eight independent ones fill the vector lanes), and only
+    /// over each row's run of cells some direction counts (`counted_run`). Directions close together
+    /// share most of their runs: pass them in order of angle.
     pub fn smith_lambdas(&self, ws: &[Vec3]) -> Vec<f64> {
         ws.chunks(LAMBDA_LANES)
             .flat_map(|c| pulp::Arch::new().dispatch(LambdaLanes { grid: self, ws: c }))
             .take(ws.len())
             .collect()
+    }
+}
+
+/// The cells `lo..hi` of a row where `t = p·wx + qy > 0`, `ps` the row's increasing slopes: `t` is monotone
+/// along the row, so they are one run (a suffix for `wx > 0`, a prefix for `wx < 0`, all or none for
+/// `wx = 0`), found by bisection.
+fn counted_run(ps: &[f64], wx: f64, qy: f64) -> (usize, usize) {
+    if wx > 0.0 {
+        (ps.partition_point(|p| p * wx + qy <= 0.0), ps.len())
+    } else if wx < 0.0 {
+        (0, ps.partition_point(|p| p * wx + qy > 0.0))
+    } else if qy > 0.0 {
+        (0, ps.len())
+    } else {
+        (0, 0)
     }
 }
 
@@ -359,18 +367,10 @@ impl pulp::WithSimd for LambdaLanes<'_> {
         for j in 0..d.ny {
             let qj = d.q_at(j);
             let qy: [f64; L] = std::array::from_fn(|l| qj * wy[l] - wz[l]);
-            // the union of the lanes' runs (see `smith_lambda`)
+            // the union of the lanes' runs
             let (mut lo, mut hi) = (d.nx, 0);
             for l in 0..L {
-                let (a, b) = if wx[l] > 0.0 {
-                    (ps.partition_point(|p| p * wx[l] + qy[l] <= 0.0), d.nx)
-                } else if wx[l] < 0.0 {
-                    (0, ps.partition_point(|p| p * wx[l] + qy[l] > 0.0))
-                } else if qy[l] > 0.0 {
-                    (0, d.nx)
-                } else {
-                    (0, 0)
-                };
+                let (a, b) = counted_run(&ps, wx[l], qy[l]);
                 if a < b {
                     lo = lo.min(a);
                     hi = hi.max(b);

@@ -98,6 +98,11 @@ fn masked_mean(values: impl Iterator<Item = (f64, f64)>) -> f64 {
             n += 1;
         }
     }
+    floored_mean(acc, n)
+}
+
+/// `acc / n` floored at 0, and 0 for no samples.
+fn floored_mean(acc: f64, n: usize) -> f64 {
     if n > 0 {
         (acc / n as f64).max(0.0)
     } else {
@@ -113,11 +118,7 @@ fn reflectance_d(brdf: &Brdf, wm: &Vec3, cfg: &HalfAngleConfig) -> f64 {
         acc += f;
         n += 1;
     });
-    if n > 0 {
-        (acc / n as f64).max(0.0)
-    } else {
-        0.0
-    }
+    floored_mean(acc, n)
 }
 
 /// One near-retro sample, kept across the masking fixed point: the reflectance does not change from one

@@ -168,7 +168,7 @@ struct TileSweep<'a> {
     stock: &'a [f64],
     /// The tile's first cell, `(i, j)`.
     corner: (usize, usize),
-    /// The tile's segments, in program order.
+    /// The tile's segments, in the sweep's [`Order`].
     bin: &'a [u32],
     sweeps: &'a [Sweep],
     segs: &'a [Segment],
@@ -218,8 +218,8 @@ impl pulp::WithSimd for TileSweep<'_> {
                     let xa = x_first + (a + c * CHUNK) as f64 * grid.pitch;
                     let xb = xa + (chunk.len() - 1) as f64 * grid.pitch;
                     let floor = sw.floor(xa, xb, y);
-                    // the chunk's highest cell, as a branch-free fold (a short-circuiting `all` compiled to
-                    // a compare and branch per cell, a third of the sweep's time)
+                    // the chunk's highest cell, as a branch-free fold (a short-circuiting `all` compiles to
+                    // a compare and branch per cell)
                     let top = chunk.iter().fold(f64::NEG_INFINITY, |m, v| if *v > m { *v } else { m });
                     if top <= floor {
                         continue;

@@ -10,7 +10,7 @@ use crate::heightfield::Heightfield;
 use crate::tool::Shape;
 use rayon::prelude::*;
 
-/// What the stock side of [`run`] works from.
+/// What the stock side of [`super::run`] works from.
 pub(super) struct StockSide<'a> {
     pub(super) machine: &'a Machine,
     pub(super) design: &'a raster::RotatedDesign,
@@ -77,11 +77,11 @@ pub(super) fn stock_side<'a>(s: &StockSide<'a>) -> Result<StockBuilt<'a>, Toolpa
         b.start_tool(tool, cut);
         tool_changes += 1;
     }
-    let mut stock = if layers > 0 {
-        stock_left(design, &b.moves, s.start, rshape)
-    } else {
-        Heightfield::flat(design.hf.nx, design.hf.ny, design.hf.pitch_mm, false, 0.0)
-    };
+    // the stock the roughing left, on the design's `(u, v)` grid, so the finishing knows what remains
+    let mut stock = Heightfield::flat(design.hf.nx, design.hf.ny, design.hf.pitch_mm, false, 0.0);
+    if layers > 0 {
+        lower_stock(design, &mut stock, &b.moves, s.start, rshape, |_, _| {});
+    }
     let levels = intermediate_levels(
         &mut b,
         design,
@@ -102,17 +102,9 @@ pub(super) fn stock_side<'a>(s: &StockSide<'a>) -> Result<StockBuilt<'a>, Toolpa
     })
 }
 
-/// The stock the moves so far leave, on the design's `(u, v)` grid: the roughing swept by the simulator's
-/// closed-form sweep ([`crate::simulate::stock::sweep_into`]), so the finishing knows what material remains.
-fn stock_left(design: &raster::RotatedDesign, moves: &[Move], start: P3, bit: Shape) -> Heightfield {
-    let hf = &design.hf;
-    let mut stock = Heightfield::flat(hf.nx, hf.ny, hf.pitch_mm, false, 0.0);
-    lower_stock(design, &mut stock, moves, start, bit, |_, _| {});
-    stock
-}
-
-/// Lower `stock` (on the design's `(u, v)` grid, nowhere above 0) by what `moves` from `start` cut, calling
-/// `lowered(i, j)` for each cell they lowered.
+/// Lower `stock` (on the design's `(u, v)` grid, nowhere above 0) by what `moves` from `start` cut, with the
+/// simulator's closed-form sweep ([`crate::simulate::stock::sweep_into`]), calling `lowered(i, j)` for each
+/// cell they lowered.
 fn lower_stock(
     design: &raster::RotatedDesign,
     stock: &mut Heightfield,
@@ -209,7 +201,7 @@ fn stock_cl_rows(
 /// sit without touching it), the tip engages `S − z` deep. While some point has `S − CL > doc`, a level runs
 /// at `z = S − doc` over the points where `S − CL > doc` (each run keeps one point at `CL` at either end;
 /// gaps up to [`rough::GAP_DIAMETERS`] tool diameters are ridden at `max(CL, S − doc)`), and the stock is then re-swept with that
-/// level's moves ([`stock_left`]), so each level is measured against the stock the one before it left, not
+/// level's moves ([`lower_stock`]), so each level is measured against the stock the one before it left, not
 /// against an estimate. Points within the depth of cut are left to the final raster, which then engages at
 /// most `doc` everywhere. Returns the number of levels.
 #[allow(clippy::too_many_arguments)]
