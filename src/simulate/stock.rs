@@ -194,6 +194,14 @@ impl pulp::WithSimd for TileSweep<'_> {
             let k = (cj0 + j) * grid.nx + ci0;
             cells.extend_from_slice(&stock[k..k + w]);
         }
+        // each chunk's highest cell, kept as the sweep lowers them, and each row's: a row or chunk whose
+        // highest cell is no higher than the lowest the segment reaches there is skipped after one compare
+        let chunks = w.div_ceil(CHUNK);
+        let highest = |c: &[f64]| c.iter().fold(f64::NEG_INFINITY, |m, v| if *v > m { *v } else { m });
+        let mut chunk_top: Vec<f64> = (0..h)
+            .flat_map(|j| cells[j * w..(j + 1) * w].chunks(CHUNK).map(highest))
+            .collect();
+        let mut row_top: Vec<f64> = chunk_top.chunks(chunks).map(highest).collect();
         let mut swept = 0u64;
         let mut rapid = vec![];
         let x_first = grid.x0 + (ci0 as f64 + 0.5) * grid.pitch;
@@ -211,21 +219,30 @@ impl pulp::WithSimd for TileSweep<'_> {
                     continue;
                 }
                 let (a, b) = (a as usize, b as usize);
-                let row = &mut cells[j * w + a..=j * w + b];
-                swept += row.len() as u64;
-                // in chunks: skip those where nothing stands above the lowest the segment can reach
-                for (c, chunk) in row.chunks_mut(CHUNK).enumerate() {
-                    let xa = x_first + (a + c * CHUNK) as f64 * grid.pitch;
-                    let xb = xa + (chunk.len() - 1) as f64 * grid.pitch;
-                    let floor = sw.floor(xa, xb, y);
-                    // the chunk's highest cell, as a branch-free fold (a short-circuiting `all` compiles to
-                    // a compare and branch per cell)
-                    let top = chunk.iter().fold(f64::NEG_INFINITY, |m, v| if *v > m { *v } else { m });
-                    if top <= floor {
+                swept += (b + 1 - a) as u64;
+                let x_at = |i: usize| x_first + i as f64 * grid.pitch;
+                if row_top[j] <= sw.floor(x_at(a), x_at(b), y) {
+                    continue;
+                }
+                let (row, tops) = (
+                    &mut cells[j * w..(j + 1) * w],
+                    &mut chunk_top[j * chunks..(j + 1) * chunks],
+                );
+                let mut row_lowered = false;
+                // chunk by chunk: skip those where nothing stands above the lowest the segment can reach
+                for (c, top) in tops.iter_mut().enumerate().take(b / CHUNK + 1).skip(a / CHUNK) {
+                    let (first, last) = ((c * CHUNK).max(a), (c * CHUNK + CHUNK - 1).min(b));
+                    let (xa, xb) = (x_at(first), x_at(last));
+                    if *top <= sw.floor(xa, xb, y) {
                         continue;
                     }
-                    let (_, low) = sw.row(y, xa, grid.pitch, chunk);
+                    let (_, low) = sw.row(y, xa, grid.pitch, &mut row[first..=last]);
+                    *top = highest(&row[c * CHUNK..((c + 1) * CHUNK).min(w)]);
                     lowered |= low;
+                    row_lowered = true;
+                }
+                if row_lowered {
+                    row_top[j] = highest(tops);
                 }
             }
             if lowered && is_rapid {
