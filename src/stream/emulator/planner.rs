@@ -103,24 +103,26 @@ impl Controller {
         feed_mm_min: f64,
         line: u32,
     ) -> Block {
-        let d: [f64; 3] = std::array::from_fn(|i| to[i] - from[i]);
-        let axis_limited = (0..3)
-            .map(|i| d[i].abs() / (self.setting(110 + i as u16).max(1e-9) / 60.0))
-            .fold(0.0, f64::max);
-        let length = (d[0] * d[0] + d[1] * d[1] + d[2] * d[2]).sqrt();
-        let duration_s = match kind {
-            BlockKind::Rapid => axis_limited,
-            BlockKind::Linear => (length / (feed_mm_min / 60.0)).max(axis_limited),
-        };
-        Block {
+        let mut b = Block {
             line,
             from,
             to,
             kind,
-            duration_s: if length < 1e-9 { 0.0 } else { duration_s },
+            duration_s: 0.0,
             elapsed_s: 0.0,
             feed_mm_min,
+        };
+        let length = b.length_mm();
+        if length >= 1e-9 {
+            let axis_limited = (0..3)
+                .map(|i| (to[i] - from[i]).abs() / (self.setting(110 + i as u16).max(1e-9) / 60.0))
+                .fold(0.0, f64::max);
+            b.duration_s = match kind {
+                BlockKind::Rapid => axis_limited,
+                BlockKind::Linear => (length / (feed_mm_min / 60.0)).max(axis_limited),
+            };
         }
+        b
     }
 
     /// Advance simulated time by `dt_s` seconds: execute motion (decelerating through a feed hold),
@@ -146,10 +148,7 @@ impl Controller {
         }
         self.run_motion(dt_s);
         if self.jog_cancel && self.decel_left_s <= 0.0 {
-            // the jog decelerated to a stop: flush what is left of it, Idle where it stopped
-            self.flush_motion();
-            self.state = State::Idle;
-            self.jog_cancel = false;
+            self.end_jog_cancel();
         }
         if self.state == State::Run && self.planner.is_empty() {
             self.state = State::Idle;
@@ -448,6 +447,34 @@ impl Controller {
                     complete: false,
                 });
             }
+        }
+    }
+
+    /// The jog cancel's stop is complete: the planned jog motion is flushed and the machine is Idle where it
+    /// stopped (GRBL's cycle stop with `SUSPEND_JOG_CANCEL`: `plan_reset`, `gc_sync_position`). A jog line
+    /// that was waiting for planner space is not flushed: it was parsed, its target fixed from the parser
+    /// position of then, and its `mc_line` was looping for room. Now that there is room it is planned from
+    /// where the machine stopped to that target, `jog_execute` starts it (state `Jog`) and it is answered.
+    fn end_jog_cancel(&mut self) {
+        let kept = match self.waiting.take() {
+            Some(Waiting::Plan { blocks, then: None }) if blocks.len() == 1 => blocks.into_iter().next(),
+            other => {
+                self.waiting = other;
+                None
+            }
+        };
+        self.flush_motion();
+        self.state = State::Idle;
+        self.jog_cancel = false;
+        if let Some(b) = kept {
+            let jog = self.block_from(self.pos, b.kind, b.to, b.feed_mm_min, b.line);
+            self.parser_pos = b.to;
+            if jog.duration_s > 0.0 {
+                self.planner.push_back(jog);
+                self.state = State::Run;
+                self.jogging = true;
+            }
+            self.say("ok");
         }
     }
 

@@ -79,6 +79,38 @@ fn a_jog_sent_during_a_jog_cancel_runs_after_it() {
     assert!(s.starts_with("<Idle|MPos:3.750,1.000,0.000"), "{s}");
 }
 
+/// A jog waiting for planner space when a jog cancel completes is not flushed with the planned jogs: GRBL's
+/// `mc_line` was looping for room with its target already fixed (from the parser position at the end of
+/// the jogs planned before it), and once `plan_reset` makes room it plans it from where the machine stopped,
+/// `jog_execute` starts it and the line is answered.
+#[test]
+fn a_jog_waiting_for_the_planner_runs_to_its_target_after_a_jog_cancel() {
+    let mut c = ctl();
+    // 2 mm jogs at 300 mm/min (0.4 s each): the planner takes 15, the 16th (target X32) waits for room
+    for k in 1..=15 {
+        assert_eq!(send(&mut c, "$J=G91X2F300\n"), "ok\r\n", "jog {k}");
+    }
+    assert_eq!(
+        send(&mut c, "$J=G91X2F300\n"),
+        "",
+        "the planner is full: the 16th waits"
+    );
+    assert_eq!(run(&mut c, 0.3), "", "still waiting while the first jog runs");
+    c.receive(0x85);
+    // 5 mm/s at $120 = 10 mm/s²: 0.5 s and 1.25 mm to stop, at X 2.75; then the 16th is planned and answered
+    let out = run(&mut c, 0.6);
+    assert_eq!(out, "ok\r\n", "the waiting jog is answered once the cancel is done");
+    let s = send(&mut c, "?");
+    assert!(s.starts_with("<Jog|"), "and runs: {s}");
+    // 29.25 mm at 5 mm/s
+    run(&mut c, 6.0);
+    let s = send(&mut c, "?");
+    assert!(s.starts_with("<Idle|MPos:32.000,0.000,0.000"), "{s}");
+    let last = c.log.executed.last().unwrap();
+    assert!(last.complete && (last.from_mm[0] - 2.75).abs() < 1e-9, "{last:?}");
+    assert!(send(&mut c, "$G\n").contains(" G90 "), "the jogs' G91 was their own");
+}
+
 /// Issue 14, row 3, as GRBL 1.1h's `limits_soft_check` runs it: a target beyond the travel during a cycle
 /// first brings the machine to a controlled stop along its path (`Hold:1` meanwhile, the line unanswered,
 /// the blocks behind it still executing as they decelerate), then `ALARM:2` and `[MSG:Reset to continue]`.
