@@ -130,8 +130,17 @@ impl Canvas {
         let greek = MonoTextStyle::new(&GREEK_6X10, BLACK);
         let mut buf = [0u8; 4];
         for (k, c) in drawn.chars().enumerate() {
+            let x = left + k as i32 * w;
+            if c == '.' {
+                // the font's full stop is a diamond reaching below the baseline, which reads as a comma in
+                // tick labels ("2,5"): a 2×2 dot standing on the baseline instead
+                for (dx, dy) in [(2, -1), (3, -1), (2, 0), (3, 0)] {
+                    self.put(i64::from(x + dx), i64::from(y + dy), [0, 0, 0]);
+                }
+                continue;
+            }
             let style = if is_greek(c) { greek } else { latin };
-            let p = Point::new(left + k as i32 * w, y);
+            let p = Point::new(x, y);
             Text::with_alignment(c.encode_utf8(&mut buf), p, style, Alignment::Left)
                 .draw(self)
                 .ok();
@@ -400,6 +409,23 @@ mod tests {
                 "{c}"
             );
         }
+    }
+
+    /// The full stop is a dot on the baseline, never below it, so "2.5" cannot read as "2,5"; the comma
+    /// still reaches below.
+    #[test]
+    fn a_full_stop_stands_on_the_baseline() {
+        let ink_rows = |s: &str| {
+            let mut c = Canvas::new(12, 16);
+            c.text(0, 10, s, Alignment::Left);
+            (0..16usize)
+                .filter(|&y| (0..12usize).any(|x| c.pixels[y * 12 + x][0] < 128))
+                .collect::<Vec<_>>()
+        };
+        assert_eq!(ink_rows("."), vec![9, 10]);
+        assert!(ink_rows(",").iter().any(|&y| y > 10), "{:?}", ink_rows(","));
+        // and digits end on the same baseline
+        assert_eq!(ink_rows("5").last(), Some(&10));
     }
 
     /// Dark pixels on the outermost rows and columns: text or lines cut by the canvas' edge.
