@@ -82,18 +82,7 @@ pub(super) fn stock_side<'a>(s: &StockSide<'a>) -> Result<StockBuilt<'a>, Toolpa
     if layers > 0 {
         lower_stock(design, &mut stock, &b.moves, s.start, rshape, |_, _| {});
     }
-    let levels = intermediate_levels(
-        &mut b,
-        design,
-        s.dc,
-        &mut stock,
-        s.vs,
-        s.raw,
-        cut.max_depth_of_cut_mm,
-        s.stepover,
-        s.feed,
-        s.tol,
-    )?;
+    let levels = intermediate_levels(&mut b, s, &mut stock)?;
     Ok(StockBuilt {
         builder: b,
         layers,
@@ -204,19 +193,9 @@ fn stock_cl_rows(
 /// level's moves ([`lower_stock`]), so each level is measured against the stock the one before it left, not
 /// against an estimate. Points within the depth of cut are left to the final raster, which then engages at
 /// most `doc` everywhere. Returns the number of levels.
-#[allow(clippy::too_many_arguments)]
-fn intermediate_levels(
-    b: &mut Builder,
-    design: &raster::RotatedDesign,
-    dc: &dropcutter::DropCutter,
-    stock: &mut Heightfield,
-    vs: &[f64],
-    finals: &[Vec<P3>],
-    doc: f64,
-    stepover: f64,
-    feed: f64,
-    tol: f64,
-) -> Result<usize, ToolpathError> {
+fn intermediate_levels(b: &mut Builder, s: &StockSide, stock: &mut Heightfield) -> Result<usize, ToolpathError> {
+    let (design, dc, vs, finals) = (s.design, s.dc, s.vs, s.raw);
+    let (doc, stepover, feed, tol) = (s.cut.max_depth_of_cut_mm, s.stepover, s.feed, s.tol);
     let gap_points = (rough::GAP_DIAMETERS * dc.cutter().diameter_mm() / design.hf.pitch_mm).ceil() as usize;
     let relief = -finals.iter().flatten().map(|p| p[2]).fold(0.0, f64::min);
     // each level lowers S by doc where it is above CL + doc; a few more than relief/doc cover the rounding
