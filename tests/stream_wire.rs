@@ -340,7 +340,8 @@ fn character_counting_keeps_many_short_lines_in_flight() {
 /// not rest on the streamer outrunning a real-time controller (a starved test runner might not): an
 /// injected stall holds the controller's motion until its receive buffer holds `128 − 2L` bytes (one line
 /// in flight may be out of it, waiting for planner space), which only a streamer that writes until the
-/// next line does not fit brings about (a stall that times out instead fails the test). Nothing here
+/// next line does not fit brings about (a stall that gives up instead, after 50 status polls answered
+/// meanwhile, fails the test: a count of the streamer's own polls, not a time). Nothing here
 /// depends on the clock: how full a 5 Hz status poll catches the buffer does, and is measured by
 /// `examples/bench_stream.rs` (a controller in real time), not here.
 #[test]

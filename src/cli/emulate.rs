@@ -18,7 +18,8 @@ pub struct Args {
     #[arg(long, default_value_t = 1.0)]
     pub time_scale: f64,
     /// Inject a fault: LINE:error[:CODE], LINE:alarm[:CODE], LINE:disconnect, LINE:silence[:MS] or
-    /// LINE:stall[:BYTES] (no motion until the receive buffer holds BYTES)
+    /// LINE:stall[:BYTES] (no motion until the receive buffer holds BYTES, 50 status reports are answered
+    /// meanwhile, or a reset)
     /// (LINE = the N line number; a silence holds every answer back for MS simulated milliseconds).
     #[arg(long = "fail-at")]
     pub fail_at: Vec<Fault>,

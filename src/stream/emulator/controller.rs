@@ -43,9 +43,9 @@ pub struct Controller {
     pub(super) decel_total_s: f64,
     /// Output is held back (not lost) until this simulated time: an injected silence.
     pub(super) mute_until_s: f64,
-    /// An injected stall: no motion until the receive buffer holds this many bytes, or until this
-    /// simulated time.
-    pub(super) stall: Option<(usize, f64)>,
+    /// An injected stall: no motion until the receive buffer holds this many bytes, or until this many
+    /// more status reports have been answered.
+    pub(super) stall: Option<(usize, usize)>,
     pub(super) rx: VecDeque<u8>,
     pub(super) reader: LineReader,
     pub(super) waiting: Option<Waiting>,
@@ -463,7 +463,7 @@ impl Controller {
             Some(FaultKind::Disconnect) => disconnect_after = true,
             Some(FaultKind::Silence(ms)) => self.mute_until_s = self.sim_time_s + f64::from(ms) / 1000.0,
             Some(FaultKind::Stall(bytes)) => {
-                self.stall = Some((usize::from(bytes), self.sim_time_s + super::fault::STALL_LIMIT_S));
+                self.stall = Some((usize::from(bytes), super::fault::STALL_LIMIT_REPORTS));
             }
             None => {}
         }

@@ -36,15 +36,18 @@ pub enum FaultKind {
     /// Run the line, then send nothing (answers and reports wait) for this many simulated milliseconds.
     Silence(u32),
     /// Run the line, then move nothing until the receive buffer holds at least this many bytes (or
-    /// [`STALL_LIMIT_S`] simulated seconds pass): the planner fills, GRBL stops taking lines, and the
-    /// stream backs up into the receive buffer whatever the speed of either side — a fill a test can
-    /// assert without a clock.
+    /// [`STALL_LIMIT_REPORTS`] status reports have been answered meanwhile, or a reset): the planner fills,
+    /// GRBL stops taking lines, and the stream backs up into the receive buffer whatever the speed of
+    /// either side — a fill a test can assert without a clock.
     Stall(u16),
 }
 
-/// The longest a [`FaultKind::Stall`] holds motion, simulated seconds (so that a streamer that never fills
-/// the buffer fails its test instead of hanging it).
-pub const STALL_LIMIT_S: f64 = 60.0;
+/// The status reports a [`FaultKind::Stall`] answers before it gives up, so that a streamer that never
+/// fills the buffer fails its test instead of hanging it. Counted in the host's own polls, not in time:
+/// bytes reach the controller in the order they were written, so a poll it answers comes after every line
+/// written before it, and a streamer that writes until the next line does not fit has filled the buffer
+/// by its first poll after the stall, however slowly either side runs (50 is 10 s of 5 Hz polls).
+pub const STALL_LIMIT_REPORTS: usize = 50;
 
 impl std::str::FromStr for Fault {
     type Err = String;

@@ -64,7 +64,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 pub use controller::Controller;
-pub use fault::{Fault, FaultAt, FaultKind, STALL_LIMIT_S};
+pub use fault::{Fault, FaultAt, FaultKind, STALL_LIMIT_REPORTS};
 pub use pty::Emulator;
 
 /// The version the emulator announces.

@@ -161,15 +161,11 @@ impl Controller {
 
     /// Execute `dt` simulated seconds of the planner's blocks (unless holding, stalled or locked).
     fn run_motion(&mut self, dt: f64) {
-        if let Some((bytes, until)) = self.stall {
-            if self.rx.len() < bytes && self.sim_time_s < until {
+        if let Some((bytes, reports_left)) = self.stall {
+            if self.rx.len() < bytes && reports_left > 0 {
                 return;
             }
-            let how = if self.rx.len() >= bytes {
-                "released"
-            } else {
-                "timed out"
-            };
+            let how = if self.rx.len() >= bytes { "released" } else { "gave up" };
             self.log.events.push(format!(
                 "stall {how} with {} bytes in the receive buffer",
                 self.rx.len()

@@ -23,6 +23,9 @@ impl Controller {
     }
 
     pub(super) fn status_report(&mut self) {
+        if let Some((_, reports_left)) = self.stall.as_mut() {
+            *reports_left = reports_left.saturating_sub(1);
+        }
         let mask = self.setting(10) as u32;
         let wco = self.wco();
         let p = if mask & 1 == 1 {
