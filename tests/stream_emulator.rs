@@ -149,7 +149,16 @@ fn random_program(rng: &mut Rng, moves: usize) -> String {
             let h = (rng.below(2001) as f64 / 1000.0 - 1.0) * 0.5;
             let (cx, cy) = ((px + x) / 2.0 - h * dy, (py + y) / 2.0 + h * dx);
             let g = if rng.below(2) == 0 { 2 } else { 3 };
-            t += &format!("G{g} X{x:.3} Y{y:.3} Z{z:.3} I{:.3} J{:.3}\n", cx - px, cy - py);
+            if i % 2 == 0 {
+                t += &format!("G{g} X{x:.3} Y{y:.3} Z{z:.3} I{:.3} J{:.3}\n", cx - px, cy - py);
+            } else {
+                // every other arc in radius form: positive the short way (the centre left of the chord
+                // for G3, right for G2), negative the long way; rounded up, a micrometre or two beyond
+                // half the chord, which GRBL would refuse below it (error:34)
+                let r = ((cx - px).hypot(cy - py) * 1000.0 + 1.0).ceil() / 1000.0;
+                let short = (g == 3) == (h >= 0.0);
+                t += &format!("G{g} X{x:.3} Y{y:.3} Z{z:.3} R{}{r:.3}\n", if short { "" } else { "-" });
+            }
         } else {
             t += &format!("G1 X{x:.3} Y{y:.3} Z{z:.3}\n");
         }
@@ -164,7 +173,7 @@ type Param = Box<dyn Fn([f64; 3]) -> f64>;
 
 /// How far along moving line `l` (from `a` to `b`, work mm) a point is, 0 at its start and 1 at its end,
 /// and the line's length: by projection on a straight line, by angle about the centre on an arc (`I J`
-/// read from the block here, independently of the streamer's arc model).
+/// or `R` read from the block here, independently of the streamer's arc model).
 fn path_param(l: &brdfmill::stream::program::Line, a: [f64; 3], b: [f64; 3]) -> (Param, f64) {
     use brdfmill::stream::program::words;
     let d: Vec<f64> = (0..3).map(|i| b[i] - a[i]).collect();
@@ -181,7 +190,18 @@ fn path_param(l: &brdfmill::stream::program::Line, a: [f64; 3], b: [f64; 3]) -> 
     };
     let ws = words(&l.block).unwrap();
     let word = |c: char| ws.iter().find(|w| w.letter == c).map_or(0.0, |w| w.value);
-    let (cx, cy) = (a[0] + word('I'), a[1] + word('J'));
+    let (cx, cy) = match ws.iter().find(|w| w.letter == 'R') {
+        // the radius form: the centre beside the chord's midpoint at h = √(r² − d²/4), to the left of the
+        // chord for G3 with R > 0 and for G2 with R < 0, else to the right
+        Some(r) => {
+            let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+            let d = dx.hypot(dy);
+            let h = (r.value * r.value - d * d / 4.0).max(0.0).sqrt() / d;
+            let h = if cw == (r.value > 0.0) { -h } else { h };
+            ((a[0] + b[0]) / 2.0 - h * dy, (a[1] + b[1]) / 2.0 + h * dx)
+        }
+        None => (a[0] + word('I'), a[1] + word('J')),
+    };
     let ang = move |p: [f64; 3]| (p[1] - cy).atan2(p[0] - cx);
     let tau = std::f64::consts::TAU;
     let turn = move |p: [f64; 3]| {

@@ -111,6 +111,37 @@ impl Arc {
         }
     }
 
+    /// The centre of a radius-form arc (`G2`/`G3` with `R`) from `from` to `to` in `plane`, placed as GRBL
+    /// 1.1's `gc_execute_line` places it: on the perpendicular bisector of the in-plane chord `(x, y)` of
+    /// length `d`, at `h = √(r² − d²/4)` from its midpoint, i.e. the start plus
+    /// `½(x − y·s, y + x·s)` with `s = ∓√(4r² − d²)/d` — right of the chord for `G2` (`cw`), left for `G3`:
+    /// the short way round, at most half a turn; a negative `r` puts it on the other side, the long way. The
+    /// centre's normal coordinate is the start's (a helix climbs along it). `None` when `4r² − d² < 0` (the
+    /// chord is longer than the diameter: GRBL's `error:34`) or the chord has no length in the plane (GRBL
+    /// refuses an end equal to the start with `error:33`, and would divide by zero for a helix straight
+    /// along the normal).
+    #[must_use]
+    pub fn center_from_radius(from: P3, to: P3, plane: Plane, r_mm: f64, cw: bool) -> Option<P3> {
+        let (a, b, _) = plane.axes();
+        let (x, y) = (to[a] - from[a], to[b] - from[b]);
+        let d = x.hypot(y);
+        let h4 = 4.0 * r_mm * r_mm - x * x - y * y;
+        if !(h4 >= 0.0 && d > 0.0) {
+            return None;
+        }
+        let mut s = -h4.sqrt() / d;
+        if !cw {
+            s = -s;
+        }
+        if r_mm < 0.0 {
+            s = -s;
+        }
+        let mut c = from;
+        c[a] = from[a] + 0.5 * (x - y * s);
+        c[b] = from[b] + 0.5 * (y + x * s);
+        Some(c)
+    }
+
     /// The start angle and the signed angular travel (rad, negative clockwise in the plane's axes) from
     /// `from`, as GRBL's `mc_arc` turns it: `atan2` of the radius vectors' cross and dot products, moved by a
     /// full turn when it points the wrong way or lies within [`ARC_ANGULAR_TRAVEL_EPSILON`] of zero — so an
@@ -364,5 +395,60 @@ mod tests {
         };
         assert!((full.sweep(from).1 - TAU).abs() < 1e-12);
         assert!(full.point_at(from, 0.5)[0] + 1.0 < 1e-12);
+    }
+
+    /// The radius form against circles whose centres are known: each centre lies at `|r|` from both ends,
+    /// on the side the direction and sign of `r` call for (the sweep is then at most, or at least, half a
+    /// turn), in every plane; chords longer than the diameter have none.
+    #[test]
+    fn radius_form_centres_lie_on_the_side_its_direction_and_sign_call_for() {
+        // the unit circle about (0, 0) in each plane, from angle 0 to 90°: short way G3 with R1, G2 with R-1
+        for plane in [Plane::Xy, Plane::Zx, Plane::Yz] {
+            let (a, b, n) = plane.axes();
+            let mut from = [0.0; 3];
+            from[a] = 1.0;
+            let mut to = [0.0; 3];
+            to[b] = 1.0;
+            to[n] = 0.7;
+            let c = Arc::center_from_radius(from, to, plane, 1.0, false).unwrap();
+            assert!(
+                c[a].abs() < 1e-15 && c[b].abs() < 1e-15 && c[n] == 0.0,
+                "{plane:?} {c:?}"
+            );
+            let arc = Arc::ccw_in_plane(to, c, plane, true, 1.0);
+            assert!((arc.sweep(from).1 - FRAC_PI_2).abs() < 1e-12);
+            // the same centre, the long way clockwise: three quarters of a turn
+            let c = Arc::center_from_radius(from, to, plane, -1.0, true).unwrap();
+            assert!(c[a].abs() < 1e-15 && c[b].abs() < 1e-15, "{plane:?} {c:?}");
+            let arc = Arc::ccw_in_plane(to, c, plane, false, 1.0);
+            assert!((arc.sweep(from).1 + 3.0 * FRAC_PI_2).abs() < 1e-12);
+            // G2 the short way and G3 the long way have the centre at (1, 1), across the chord
+            for (r, cw) in [(1.0, true), (-1.0, false)] {
+                let c = Arc::center_from_radius(from, to, plane, r, cw).unwrap();
+                assert!(
+                    (c[a] - 1.0).abs() < 1e-15 && (c[b] - 1.0).abs() < 1e-15,
+                    "{plane:?} {c:?}"
+                );
+                let arc = Arc {
+                    to,
+                    center: c,
+                    plane,
+                    cw,
+                    feed_mm_min: 1.0,
+                };
+                let want = if r > 0.0 { FRAC_PI_2 } else { 3.0 * FRAC_PI_2 };
+                assert!((arc.sweep(from).1.abs() - want).abs() < 1e-12, "{plane:?} {r} {cw}");
+            }
+        }
+        // a half turn: the centre is the chord's midpoint whichever the sign
+        let (from, to) = ([0.0, 0.0, 0.0], [2.0, 0.0, 0.0]);
+        for r in [1.0, -1.0] {
+            let c = Arc::center_from_radius(from, to, Plane::Xy, r, true).unwrap();
+            assert!((c[0] - 1.0).abs() < 1e-15 && c[1].abs() < 1e-15);
+        }
+        // a 3-4-5 chord: d = 5, r = 2.5 + ε has its centre near the midpoint; r < d/2 has none
+        assert!(Arc::center_from_radius(from, [3.0, 4.0, 0.0], Plane::Xy, 2.4999, false).is_none());
+        assert!(Arc::center_from_radius(from, [0.0, 0.0, 1.0], Plane::Xy, 1.0, false).is_none());
+        assert!(Arc::center_from_radius(from, to, Plane::Xy, f64::NAN, false).is_none());
     }
 }

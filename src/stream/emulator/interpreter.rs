@@ -73,8 +73,8 @@ struct Parsed {
     f: Option<f64>,
     s: Option<f64>,
     p: Option<f64>,
-    /// A word the emulator does not model.
-    unmodelled: Option<String>,
+    /// An arc's radius (`R`, the radius form), in the block's units.
+    r: Option<f64>,
     groups: HashSet<u8>,
     seen: HashSet<char>,
 }
@@ -272,7 +272,7 @@ impl Parsed {
             }
             'T' => {}
             'L' => self.l = Some(v),
-            'R' => self.unmodelled = Some(format!("{letter} word")),
+            'R' => self.r = Some(v),
             _ => return Err(20),
         }
         if matches!(letter, 'F' | 'S' | 'P' | 'T' | 'N') && v < 0.0 {
@@ -328,12 +328,18 @@ impl Parsed {
         if g10 || self.non_modal == Some(NonModal::SetOffset) || self.tool_length.is_some() {
             return Ok(());
         }
-        let arc = has_axis && matches!(m.motion, MotionMode::ArcCw | MotionMode::ArcCcw);
-        if self.ijk.iter().any(Option::is_some) && !arc {
-            return Err(36);
-        }
         if has_axis && m.motion == MotionMode::Cancel {
             return Err(31);
+        }
+        Ok(())
+    }
+
+    /// GRBL's last check (step 3, "non-specific"), after the motion's own: offsets or a radius that no arc
+    /// used are unused words (an arc in radius form with offsets too fails it in `Controller::arc`).
+    fn unused_words(&self, m: &Modal) -> Result<(), u16> {
+        let arc = self.has_axis() && matches!(m.motion, MotionMode::ArcCw | MotionMode::ArcCcw);
+        if (self.ijk.iter().any(Option::is_some) || self.r.is_some()) && !arc {
+            return Err(36);
         }
         Ok(())
     }
@@ -347,10 +353,6 @@ impl Controller {
         let parsed = Parsed::new(ws.iter().map(|w| (w.letter, w.value)), &mut m)?;
         if parsed.mist_word && !self.enable_m7 {
             return Err(20); // a default build has no M7
-        }
-        if let Some(what) = &parsed.unmodelled {
-            self.log.events.push(format!("not modelled: {what} in `{text}`"));
-            return Err(20);
         }
         let k = if m.units == Units::Inch { 25.4 } else { 1.0 };
         let inverse = parsed.feed_mode.unwrap_or(self.inverse_time);
@@ -402,6 +404,7 @@ impl Controller {
         } else {
             self.motion(&parsed, &m, target, k, text, inverse)?
         };
+        parsed.unused_words(&m)?;
         let end = match (&moves, parsed.non_modal) {
             (_, Some(NonModal::GoStored(w))) => Some(self.stored_target(&parsed, stored[w])),
             (Some(blocks), _) => blocks.back().map(|b| b.to),
@@ -499,20 +502,22 @@ impl Controller {
         inverse: bool,
     ) -> Result<Option<Moves>, u16> {
         let probe = matches!(m.motion, MotionMode::Probe { .. });
+        let feed = m.feed_mm_min.unwrap_or(0.0);
         if !parsed.has_axis() {
-            // GRBL: a G38.x word without axis words is an error (26); any other motion mode just stays
-            return if probe && parsed.motion.is_some() {
-                Err(26)
-            } else {
-                Ok(None)
+            // GRBL: a G2, G3 or G38.x word without axis words needs a feed (22), then is an error (26); a
+            // modal motion without axis words, or G0/G1 alone, just stays
+            let needs_axes = probe || matches!(m.motion, MotionMode::ArcCw | MotionMode::ArcCcw);
+            return match (needs_axes && parsed.motion.is_some(), feed > 0.0) {
+                (false, _) => Ok(None),
+                (true, false) => Err(22),
+                (true, true) => Err(26),
             };
         }
-        let feed = m.feed_mm_min.unwrap_or(0.0);
         if m.motion != MotionMode::Rapid && feed <= 0.0 {
             return Err(22);
         }
         let arc = match m.motion {
-            MotionMode::ArcCw | MotionMode::ArcCcw => Some(self.arc(parsed, m, target, k)?),
+            MotionMode::ArcCw | MotionMode::ArcCcw => Some(self.arc(parsed, m, target, k, text)?),
             _ => None,
         };
         if probe && (0..3).all(|i| (target[i] - self.parser_pos[i]).abs() < 1e-9) {
@@ -563,37 +568,59 @@ impl Controller {
         blocks
     }
 
-    /// An arc in the block's plane (offsets `I J` in G17, `K I` in G18, `J K` in G19) from the parser
-    /// position to `target`, with GRBL's arc errors: 32 without an in-plane axis word, 35 without an in-plane
-    /// offset (one normal to the plane is read and ignored, as GRBL clears all three), 33 when the end radius
-    /// differs from the start's by more than 0.005 mm and either 0.5 mm or 0.1% (GRBL 1.1 `gc_execute_line`).
-    fn arc(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], k: f64) -> Result<Arc, u16> {
+    /// An arc in the block's plane from the parser position to `target`, with GRBL 1.1's arc errors
+    /// (`gc_execute_line`): 32 without an in-plane axis word. In radius form (`R`, [`Arc::center_from_radius`]):
+    /// 33 when the end is the start, 34 when the chord is longer than the diameter, then 36 when offsets
+    /// came too (only `R` is used). In offset form (`I J` in G17, `K I` in G18, `J K` in G19): 35 without an
+    /// in-plane offset (one normal to the plane is read and ignored, as GRBL clears all three), 33 when the
+    /// end radius differs from the start's by more than 0.005 mm and either 0.5 mm or 0.1%.
+    fn arc(&mut self, parsed: &Parsed, m: &Modal, target: [f64; 3], k: f64, text: &str) -> Result<Arc, u16> {
         let plane = Plane::from_g(m.plane);
         let (a, b, _) = plane.axes();
         let (axis, ijk) = (parsed.axis, parsed.ijk);
         if axis[a].is_none() && axis[b].is_none() {
             return Err(32);
         }
-        if ijk[a].is_none() && ijk[b].is_none() {
-            return Err(35);
-        }
-        let c = [
-            self.parser_pos[a] + ijk[a].unwrap_or(0.0) * k,
-            self.parser_pos[b] + ijk[b].unwrap_or(0.0) * k,
-        ];
-        let r0 = (self.parser_pos[a] - c[0]).hypot(self.parser_pos[b] - c[1]);
-        let r1 = (target[a] - c[0]).hypot(target[b] - c[1]);
-        let dr = (r1 - r0).abs();
-        if dr > 0.005 && (dr > 0.5 || dr > 0.001 * r0) {
-            return Err(33);
-        }
-        let mut center = [0.0; 3];
-        (center[a], center[b]) = (c[0], c[1]);
+        let cw = m.motion == MotionMode::ArcCw;
+        let from = self.parser_pos;
+        let center = if let Some(r) = parsed.r {
+            if target == from {
+                return Err(33);
+            }
+            let Some(center) = Arc::center_from_radius(from, target, plane, r * k, cw) else {
+                if (target[a] - from[a]).hypot(target[b] - from[b]) == 0.0 {
+                    // a helix along the normal alone: GRBL divides by the zero chord and plans a NaN centre
+                    self.log.events.push(format!(
+                        "not modelled: an `R` arc with no travel in its plane in `{text}`"
+                    ));
+                    return Err(33);
+                }
+                return Err(34);
+            };
+            if ijk.iter().any(Option::is_some) {
+                return Err(36);
+            }
+            center
+        } else {
+            if ijk[a].is_none() && ijk[b].is_none() {
+                return Err(35);
+            }
+            let c = [from[a] + ijk[a].unwrap_or(0.0) * k, from[b] + ijk[b].unwrap_or(0.0) * k];
+            let r0 = (from[a] - c[0]).hypot(from[b] - c[1]);
+            let r1 = (target[a] - c[0]).hypot(target[b] - c[1]);
+            let dr = (r1 - r0).abs();
+            if dr > 0.005 && (dr > 0.5 || dr > 0.001 * r0) {
+                return Err(33);
+            }
+            let mut center = [0.0; 3];
+            (center[a], center[b]) = (c[0], c[1]);
+            center
+        };
         Ok(Arc {
             to: target,
             center,
             plane,
-            cw: m.motion == MotionMode::ArcCw,
+            cw,
             feed_mm_min: m.feed_mm_min.unwrap_or(0.0),
         })
     }

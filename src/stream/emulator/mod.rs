@@ -12,11 +12,12 @@
 //! - [`Emulator`]: runs a controller on a pseudo-terminal in its own thread, pacing bytes both ways at the
 //!   configured baud (10 bits per byte, 8N1) and running motion `time_scale` times faster than real time.
 //!
-//! Modelled G-code: G0 G1 G2 G3 (offset form `I J K` in the G17, G18 or G19 plane) G4 G17 G18 G19 G20 G21 G40
+//! Modelled G-code: G0 G1 G2 G3 (offset form `I J K` or radius form `R`, in the G17, G18 or G19 plane) G4 G17 G18 G19 G20 G21 G40
 //! G80 G90 G91 G91.1 G93 G94 (inverse time: F on every motion block, a block takes 1/F minutes), work coordinates (G54–G59, G10 L2/L20, G92/G92.1, G43.1/G49, G53, G28/G28.1,
-//! G30/G30.1: see `interpreter`), M0 M1 M2 M30 M3 M4 M5 M7 M8 M9, F S T N P L words. Not modelled
-//! (answered `error:20`, and logged as such): arcs in R form; G61 is accepted as GRBL's only path control mode (G61.1 and G64 answer `error:20`); `$SLP` (answered
-//! `error:3`). G38.2–G38.5 probing is modelled against a touch plate (`probe_plate_z_mm`; see `planner`).
+//! G30/G30.1: see `interpreter`), M0 M1 M2 M30 M3 M4 M5 M7 M8 M9, F S T N P L R words; G61 is accepted
+//! as GRBL's only path control mode (G61.1 and G64 answer `error:20`). Not modelled: `$SLP` (answered
+//! `error:3`), and an `R` arc with no travel in its plane (GRBL's centre would be NaN; answered `error:33`
+//! and logged). G38.2–G38.5 probing is modelled against a touch plate (`probe_plate_z_mm`; see `planner`).
 //! `$J=` jogging is modelled (state `Jog`, jog cancel 0x85, see `system`). An arc is planned as GRBL's
 //! `mc_arc` chords (`$12`), one planner block each, and answered once its last chord is planned, so a long
 //! arc runs before its `ok`. Blocks cruise at their feed (no acceleration between them); a feed hold

@@ -299,6 +299,110 @@ fn arcs_in_every_plane_follow_grbl() {
     assert_eq!(send_and_run(&mut c, "G19G3Y2.004Z0J1K0\n"), "ok\r\n", "within 0.005 mm");
 }
 
+/// The positions a controller passes through running `block` from rest at (0, 0, 0), sampled every 5 ms,
+/// and its answers.
+fn trace(block: &str) -> (Vec<[f64; 3]>, String) {
+    let mut c = ctl();
+    assert_eq!(send(&mut c, "G1X0Y0Z0F600\n"), "ok\r\n");
+    let mut out = send(&mut c, block);
+    let mut path = vec![];
+    for _ in 0..4000 {
+        c.advance(0.005);
+        path.push(c.position());
+        out += &String::from_utf8(c.take_output()).unwrap();
+    }
+    (path, out)
+}
+
+/// The largest distance between two traces' positions at the same time, mm.
+fn gap(a: &[[f64; 3]], b: &[[f64; 3]]) -> f64 {
+    assert_eq!(a.len(), b.len());
+    a.iter()
+        .zip(b)
+        .map(|(p, q)| crate::gcode::moves::dist(*p, *q))
+        .fold(0.0, f64::max)
+}
+
+/// Arcs in radius form as GRBL 1.1h's `gc_execute_line` reads them: the same chords, at the same times, as
+/// the offset form with the centre worked out by hand (which [`arcs_in_every_plane_follow_grbl`] checks), a
+/// negative radius the long way round, inch radii converted, and the errors 33, 34, 36, 26 and 32 in
+/// GRBL's order.
+#[test]
+fn arcs_in_radius_form_follow_grbl() {
+    // a half turn clockwise from (0,0) to (2,0) over the top: the centre is (1,0) for either sign of R
+    let (by_r, out) = trace("G2X2Y0R1\n");
+    assert_eq!(out, "ok\r\n");
+    let (by_ij, _) = trace("G2X2Y0I1J0\n");
+    assert!(
+        gap(&by_r, &by_ij) == 0.0,
+        "the same chords at the same times: {}",
+        gap(&by_r, &by_ij)
+    );
+    let top = by_r.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max);
+    assert!(
+        (top - 1.0).abs() < 0.002 && by_r.last() == Some(&[2.0, 0.0, 0.0]),
+        "{top}"
+    );
+    // G3 to (2,0) with: the centre below the chord at (1, −√1.25), 276° the long way round, down to
+    // y = −√1.25 − 1.5; in G18 the same arc runs in Z and X (offsets K I)
+    let below = -(1.25f64.sqrt());
+    let (long, _) = trace("G3X2Y0R-1.5\n");
+    let (long_ij, _) = trace(&format!("G3X2Y0I1J{below}\n"));
+    assert!(gap(&long, &long_ij) < 1e-9, "{}", gap(&long, &long_ij));
+    let low = long.iter().map(|p| p[1]).fold(f64::INFINITY, f64::min);
+    assert!((low - (below - 1.5)).abs() < 0.002, "{low}");
+    // G18 turns in (Z, X): the chord runs along its second axis, so the long way's centre is at z = +√1.25
+    let (zx, _) = trace("G18G3X2Z0R-1.5\n");
+    let (zx_ik, _) = trace(&format!("G18G3X2Z0I1K{}\n", -below));
+    assert!(gap(&zx, &zx_ik) < 1e-9, "{}", gap(&zx, &zx_ik));
+    // inches: 2 mm is 0.0787402 in, the radius of 1 mm 0.0393701 in
+    let (inch, out) = trace("G20G2X0.0787402Y0R0.0393701\n");
+    assert_eq!(out, "ok\r\n");
+    let top = inch.iter().map(|p| p[1]).fold(f64::NEG_INFINITY, f64::max);
+    assert!((top - 1.0).abs() < 0.002, "{top}");
+
+    let mut c = ctl();
+    assert_eq!(send(&mut c, "G1X0Y0Z0F600\n"), "ok\r\n");
+    assert_eq!(
+        send(&mut c, "G2X2Y0R0.9\n"),
+        "error:34\r\n",
+        "the chord is longer than the diameter"
+    );
+    assert_eq!(send(&mut c, "G2X0Y0R1\n"), "error:33\r\n", "the end is the start");
+    assert_eq!(
+        send(&mut c, "G2X2Y0R1I1\n"),
+        "error:36\r\n",
+        "R and an offset: the offset is unused"
+    );
+    assert_eq!(
+        send(&mut c, "G2X2Y0R0.9I1\n"),
+        "error:34\r\n",
+        "the arc's own error comes first"
+    );
+    assert_eq!(send(&mut c, "G1X1R1\n"), "error:36\r\n", "R without an arc");
+    assert_eq!(
+        send(&mut c, "G2R1\n"),
+        "error:26\r\n",
+        "an explicit G2 needs axis words"
+    );
+    assert_eq!(send(&mut c, "G2Z1R1\n"), "error:32\r\n", "no in-plane axis word");
+    // only Z moves: GRBL would divide by the zero chord; the emulator refuses and logs it
+    assert_eq!(send(&mut c, "G2X0Z1R1\n"), "error:33\r\n");
+    assert!(
+        c.log.events.iter().any(|e| e.contains("not modelled")),
+        "{:?}",
+        c.log.events
+    );
+    assert_eq!(send_and_run(&mut c, "G2X2R1\n"), "ok\r\n");
+    let mut fresh = ctl();
+    assert_eq!(send(&mut fresh, "G2X2Y0R1\n"), "error:22\r\n", "no feed yet");
+    assert_eq!(
+        send(&mut fresh, "G2R1\n"),
+        "error:22\r\n",
+        "the feed is checked before the axis words"
+    );
+}
+
 /// [`send`], then run the motion for up to 100 simulated seconds: all the answers.
 fn send_and_run(c: &mut Controller, s: &str) -> String {
     let mut out = send(c, s);

@@ -55,9 +55,10 @@ fn project(a: [f64; 3], b: [f64; 3], p: [f64; 3]) -> (f64, [f64; 3]) {
     (t, q)
 }
 
-/// The arc line `l` draws from `start` (work mm): its centre from the `I J K` offsets (relative to the
-/// start, GRBL's only arc distance mode) in the line's plane and units. `None` for anything else, the `R`
-/// form included: a stop inside such a line is not located.
+/// The arc line `l` draws from `start` (work mm), in the line's plane and units: its centre from the `R`
+/// word as GRBL places it ([`Arc::center_from_radius`]), or else from the `I J K` offsets (relative to the
+/// start, GRBL's only arc distance mode). `None` for anything else, and for a block GRBL would refuse (`R`
+/// with offsets, a chord longer than the diameter).
 pub(super) fn arc_of(l: &Line, start: [f64; 3]) -> Option<Arc> {
     let cw = match l.motion? {
         MotionMode::ArcCw => true,
@@ -66,20 +67,27 @@ pub(super) fn arc_of(l: &Line, start: [f64; 3]) -> Option<Arc> {
     };
     let end = known(l.end_mm)?;
     let ws = words(&l.block).ok()?;
-    if l.after.arc_distance != Distance::Incremental || ws.iter().any(|w| w.letter == 'R') {
-        return None;
-    }
     let k = l.after.units.mm();
-    let mut center = start;
-    for w in &ws {
-        if let Some(i) = ['I', 'J', 'K'].iter().position(|&c| c == w.letter) {
-            center[i] = start[i] + w.value * k;
+    let plane = Plane::from_g(l.after.plane);
+    let offset = |c: char| ['I', 'J', 'K'].contains(&c);
+    let center = match ws.iter().find(|w| w.letter == 'R') {
+        Some(_) if ws.iter().any(|w| offset(w.letter)) => return None,
+        Some(r) => Arc::center_from_radius(start, end, plane, r.value * k, cw)?,
+        None if l.after.arc_distance != Distance::Incremental => return None,
+        None => {
+            let mut center = start;
+            for w in &ws {
+                if let Some(i) = ['I', 'J', 'K'].iter().position(|&c| c == w.letter) {
+                    center[i] = start[i] + w.value * k;
+                }
+            }
+            center
         }
-    }
+    };
     Some(Arc {
         to: end,
         center,
-        plane: Plane::from_g(l.after.plane),
+        plane,
         cw,
         feed_mm_min: l.after.feed_mm_min.unwrap_or(0.0),
     })
@@ -349,6 +357,29 @@ mod tests {
         // the mirror point below the axis is not on this arc (it turns over the top)
         let below = [on_chord[0], -on_chord[1], 0.0];
         assert!(locate(&p, &c, &ev(None, below), 0.005).is_err());
+    }
+
+    /// A stop inside an arc in radius form is located on the circle GRBL draws: the half turn `G2 X10 R5`
+    /// from (0,0) over the top (centre (5,0)), and back the long way, `G3 X0 R-5.5`: counter-clockwise
+    /// from (10,0) to (0,0) about (5, √5.25), over the top again; `R` with offsets is a block GRBL refuses,
+    /// so no arc.
+    #[test]
+    fn a_stop_inside_an_arc_in_radius_form_is_located_on_its_circle() {
+        let p = prog("G21G90\nG0X0Y0Z0\nG2X10Y0R5F300\nG3X0Y0R-5.5\nG2X10Y0R5I5\n");
+        let top = [5.0 - 5.0 * 0.6, 5.0 * 0.8, 0.0];
+        let loc = locate(&p, &[3, 4], &ev(None, top), 0.005).unwrap();
+        let (n, at) = loc.partial.unwrap();
+        assert!(n == 3 && dist(at, top) < 1e-12, "{loc:?}");
+        let arc = arc_of(p.line(3).unwrap(), [0.0; 3]).unwrap();
+        assert!(dist(arc.center, [5.0, 0.0, 0.0]) < 1e-12, "{:?}", arc.center);
+        let cy = (5.5f64 * 5.5 - 25.0).sqrt();
+        let long = arc_of(p.line(4).unwrap(), [10.0, 0.0, 0.0]).unwrap();
+        assert!(dist(long.center, [5.0, cy, 0.0]) < 1e-12, "{:?}", long.center);
+        // its highest point, halfway along its 229°
+        let high = [5.0, cy + 5.5, 0.0];
+        let loc = locate(&p, &[4], &ev(None, high), 0.005).unwrap();
+        assert_eq!(loc.partial.map(|x| x.0), Some(4), "{loc:?}");
+        assert!(arc_of(p.line(5).unwrap(), [0.0; 3]).is_none());
     }
 
     /// A short arc GRBL runs as one chord (θ = 0.11 rad at r = 5: ⌊0.275 / √(0.002·9.998)⌋ = 1) passes

@@ -406,7 +406,7 @@ fn finish_cut(line: &Line, n: usize, at: [f64; 3], cfg: &Config) -> Result<Outgo
         Some(MotionMode::ArcCw | MotionMode::ArcCcw) => {
             let arc = known(line.start_mm)
                 .and_then(|start| arc_of(line, start))
-                .ok_or_else(|| format!("line {n} is an arc cut mid-way whose centre is not known (R form?)"))?;
+                .ok_or_else(|| format!("line {n} is an arc cut mid-way whose centre is not known (its start, or a valid `R` or `I J K`)"))?;
             let (a, b, _) = arc.plane.axes();
             let reached = |i: usize| fmt_mm(at[i]).parse::<f64>().unwrap_or(at[i]);
             let offset = |i: usize| format!("{}{}", ['I', 'J', 'K'][i], fmt_mm(arc.center[i] - reached(i)));
