@@ -192,9 +192,19 @@ pub use crate::gcode::lex::Word;
 pub use crate::gcode::lex::LexErrorKind as WordError;
 
 /// Clean a line as GRBL's serial reader does: drop `(…)` and `;…` comments, whitespace and control
-/// characters and `/`, upper-case letters.
+/// characters and `/`, upper-case letters; a `%` line (a program's start or end mark) is nothing to send.
 #[must_use]
 pub fn clean(line: &str) -> String {
+    let out = clean_keeping_percent(line);
+    if out == "%" {
+        String::new()
+    } else {
+        out
+    }
+}
+
+/// [`clean`], keeping a `%` line as `%`.
+fn clean_keeping_percent(line: &str) -> String {
     let mut out = String::with_capacity(line.len());
     let mut in_paren = false;
     for c in line.chars() {
@@ -211,9 +221,6 @@ pub fn clean(line: &str) -> String {
             c if c <= ' ' => {}
             c => out.push(c.to_ascii_uppercase()),
         }
-    }
-    if out == "%" {
-        out.clear();
     }
     out
 }
@@ -265,6 +272,10 @@ impl Program {
         let mut modal = Modal::default();
         let mut pos: Position = [None; 3];
         let mut lines = Vec::with_capacity(src.len());
+        // where the program ended, as the simulator reads it: `M2`/`M30`, or a `%` after content (a first
+        // `%` before any is the start mark)
+        let mut end: Option<(usize, &str)> = None;
+        let (mut percents, mut content) = (0, false);
         for (i, s) in src.iter().enumerate() {
             let number = i + 1;
             let syntax = |what: String| ProgramError::Syntax {
@@ -273,6 +284,22 @@ impl Program {
                 what,
                 text: (*s).to_string(),
             };
+            let raw = clean_keeping_percent(s);
+            if let Some((at, what)) = end.filter(|_| !raw.is_empty() && raw != "%") {
+                // GRBL would run it; the simulation, and so the verification, never read it
+                return Err(syntax(format!(
+                    "a block after the program's end ({what} at line {at}), which the simulation does not read: \
+                     remove it or the end"
+                )));
+            }
+            if raw == "%" {
+                percents += 1;
+                if percents == 2 || content {
+                    end = Some((number, "`%`"));
+                }
+            } else if !raw.is_empty() {
+                content = true;
+            }
             // A control character in a line is never G-code: it is a corrupted file or text injected into it
             // (GRBL would drop it silently and run the rest of the line).
             if let Some(c) = s.chars().find(|c| c.is_control() && *c != '\t' && *c != '\r') {
@@ -321,6 +348,11 @@ impl Program {
                 apply(&ws, &mut modal, &mut pos, &mut line);
                 line.end_mm = pos;
                 line.after = modal;
+                match line.program_flow() {
+                    Some(2) => end = Some((number, "`M2`")),
+                    Some(30) => end = Some((number, "`M30`")),
+                    _ => {}
+                }
             } else if kind == LineKind::System && (line.block == "$H" || line.block.starts_with("$J")) {
                 line.breaks_position = true;
                 pos = [None; 3];
@@ -528,14 +560,36 @@ mod tests {
     /// answered after its motion.
     #[test]
     fn program_flow_as_grbl_reads_it() {
-        let p = prog("G21G90\nM0\nM1\nM30\nG4P1\nG1X1F100M2\nG1X2\nG2X4I1J0\n");
-        let sync: Vec<bool> = (2..=7).map(|n| p.line(n).unwrap().synchronises()).collect();
-        assert_eq!(sync, [true, false, true, true, true, false]);
-        assert!(p.line(2).unwrap().pauses() && !p.line(3).unwrap().pauses() && !p.line(4).unwrap().pauses());
-        let after: Vec<bool> = (5..=8)
+        let p = prog("G21G90\nM0\nM1\nG4P1\nG1X2F100\nG2X4I1J0\nG1X1M30\n");
+        let sync: Vec<bool> = [2, 3, 4, 5, 7].map(|n| p.line(n).unwrap().synchronises()).to_vec();
+        assert_eq!(sync, [true, false, true, false, true]);
+        assert!(p.line(2).unwrap().pauses() && !p.line(3).unwrap().pauses() && !p.line(7).unwrap().pauses());
+        let after: Vec<bool> = (4..=7)
             .map(|n| p.line(n).unwrap().answered_after_its_motion())
             .collect();
-        assert_eq!(after, [false, true, false, true]);
+        assert_eq!(after, [false, false, true, true]);
+        let end = prog("G21G90\nG1X1F100M2\n");
+        assert!(end.line(2).unwrap().synchronises() && end.line(2).unwrap().answered_after_its_motion());
+    }
+
+    /// A block after `M2`/`M30` or a closing `%` would run on GRBL, which reads on, but the simulation stops
+    /// at the end (as LinuxCNC does): such a program is refused, naming the line and the end. `%` marks, a
+    /// start before any block and an end after `M30`, and comments after the end are fine.
+    #[test]
+    fn a_block_after_the_programs_end_is_refused() {
+        for (text, line, end) in [
+            ("G21\nM30\nG1X5F100\n", 3, "`M30` at line 2"),
+            ("%\nG21\nM2\n\nG0X1\n", 5, "`M2` at line 3"),
+            ("%\nG21\n%\nG1X5F100\n", 4, "`%` at line 3"),
+            ("G21\n%\nG1X5F100\n", 3, "`%` at line 2"),
+        ] {
+            let e = Program::parse(Path::new("p.nc"), text, 0, false)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains(&format!("p.nc:{line}:")) && e.contains(end), "{text:?}: {e}");
+        }
+        let ok = prog("%\n(start)\nG21G90\nG1X1F100\nM30\n%\n(after the end)\n; and this\n");
+        assert_eq!(ok.sendable().count(), 3);
     }
 
     #[test]
