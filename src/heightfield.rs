@@ -56,7 +56,7 @@ impl Heightfield {
         if self.nx == 0 || self.ny == 0 {
             return Err(format!("heightfield is empty ({}×{})", self.nx, self.ny));
         }
-        if self.z_mm.len() != self.nx * self.ny {
+        if self.nx.checked_mul(self.ny) != Some(self.z_mm.len()) {
             return Err(format!(
                 "{} heights for a {}×{} grid",
                 self.z_mm.len(),

@@ -25,6 +25,7 @@
 
 pub mod analyze;
 pub mod brdf;
+pub mod de;
 pub mod design;
 pub mod distance;
 pub mod facets;

@@ -48,10 +48,24 @@ pub fn read_f64_2d(path: &Path) -> Result<(usize, usize, Vec<f64>), NpyError> {
     if npy.order() != npyz::Order::C {
         return Err(fmt("expected C (row-major) order, got Fortran order".into()));
     }
+    // checked: a shape whose product wraps (2^62 × 4 is 0 modulo 2^64) would pass for the data read
+    let (rows, cols) = (usize::try_from(shape[0]).ok(), usize::try_from(shape[1]).ok());
+    let Some((rows, cols, count)) = rows.zip(cols).and_then(|(r, c)| Some((r, c, r.checked_mul(c)?))) else {
+        return Err(fmt(format!(
+            "shape ({}, {}) has more values than this machine can address",
+            shape[0], shape[1]
+        )));
+    };
     let data: Vec<f64> = npy
         .into_vec::<f64>()
         .map_err(|e| fmt(format!("expected float64 values: {e}")))?;
-    Ok((shape[0] as usize, shape[1] as usize, data))
+    if data.len() != count {
+        return Err(fmt(format!(
+            "shape ({rows}, {cols}) is {count} values, the file holds {}",
+            data.len()
+        )));
+    }
+    Ok((rows, cols, data))
 }
 
 #[cfg(test)]

@@ -82,6 +82,65 @@ fn job_values_that_would_overflow_or_never_end_are_refused_before_any_file() {
     }
 }
 
+/// Values the toolpath stage used to refuse only after the NDF and the design had run and written their
+/// files, or not at all (a feed written as `F0`, a third area value dropped, a test of a billion
+/// permutations): each is refused before any file, naming its key.
+#[test]
+fn toolpath_and_facets_values_are_refused_before_any_stage_runs() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let job = job_with(dir.path(), &[]);
+    for (set, want) in [
+        ("toolpath.feed_mm_min=0.01", "feed_mm_min"),
+        ("toolpath.feed_mm_min=1e9", "feed_mm_min"),
+        ("toolpath.feed_mm_min=-1", "feed_mm_min"),
+        ("toolpath.feed_mm_min=nan", "feed_mm_min"),
+        ("toolpath.rough_tool=nope", "nope"),
+        ("toolpath.tolerance_um=-1", "tolerance_um"),
+        ("toolpath.tolerance_um=nan", "tolerance_um"),
+        ("toolpath.angle_deg=inf", "angle_deg"),
+        ("toolpath.area_mm=[5.0, 5.0, 5.0]", "two numbers"),
+        ("toolpath.area_mm=[300.0, 0.6]", "area"),
+        ("facets.test_permutations=1000000000", "test_permutations"),
+        ("facets.cvt_weight_exponent=0", "cvt_weight_exponent"),
+        ("facets.anneal.initial_temperature=inf", "initial_temperature"),
+        ("facets.anneal.final_temperature_ratio=2", "final_temperature_ratio"),
+        ("facets.seed=\"-1\"", "seed"),
+    ] {
+        let o = brdfmill(&[
+            "run",
+            job.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--set",
+            set,
+        ]);
+        refused(&o, &[want], &out);
+    }
+    // a job name that would break out of the program's header comment
+    let job = job_with(dir.path(), &[("name = \"isotropic", "name = \"evil)\\nG0 Z-20 (")]);
+    let o = brdfmill(&["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    refused(&o, &["job.toml", "`name`"], &out);
+}
+
+/// The seeds a run prints for its candidate arrangements reach 2⁶⁴ − 1, beyond TOML's integers: given back
+/// as text they are read (the run then gets past the job's checks; `--until ndf` keeps it short).
+#[test]
+fn a_printed_seed_above_toml_integers_is_read_back_as_text() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let job = job_with(dir.path(), &[("seed = 1", "seed = \"11400714819323198486\"")]);
+    let o = brdfmill(&[
+        "run",
+        job.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--until",
+        "ndf",
+    ]);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
 #[test]
 fn facet_counts_that_wrap_are_refused_on_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -248,4 +307,62 @@ fn a_float32_npy_names_its_path_once() {
     refused(&o, &["f32.npy", "float64"], &out);
     let err = String::from_utf8_lossy(&o.stderr);
     assert_eq!(err.matches("f32.npy").count(), 1, "{err}");
+}
+
+/// A reader that goes away (`brdfmill run … | head -2`) does not end the run: its progress lines are
+/// dropped, not a panic on the broken pipe, and the stage finishes with its files and exit code.
+#[test]
+fn a_closed_standard_output_does_not_end_a_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let job = job_with(dir.path(), &[]);
+    let mut child = Command::new(env!("CARGO_BIN_EXE_brdfmill"))
+        .args([
+            "run",
+            job.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--until",
+            "ndf",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    drop(child.stdout.take());
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stderr));
+    assert!(out.join("ndf.json").is_file());
+    let run = std::fs::read_to_string(out.join("run.json")).unwrap();
+    assert!(!run.contains("\"running\""), "{run}");
+}
+
+/// A .npy header whose shape multiplies past 2⁶⁴ (2⁶² × 4 wraps to 0, so the 4096 values that follow
+/// passed for it and the reader indexed beyond them: a panic) is refused, naming the file and the shape.
+#[test]
+fn an_npy_shape_that_wraps_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    for shape in ["(4611686018427388928, 4)", "(4294967296, 4294967296)"] {
+        let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}");
+        while (10 + header.len() + 1) % 64 != 0 {
+            header.push(' ');
+        }
+        header.push('\n');
+        let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+        bytes.extend((header.len() as u16).to_le_bytes());
+        bytes.extend(header.as_bytes());
+        bytes.extend((0..4096).flat_map(|k| (k as f64 * 1e-3).to_le_bytes()));
+        let npy = dir.path().join("wrap.npy");
+        std::fs::write(&npy, bytes).unwrap();
+        let o = brdfmill(&[
+            "analyze",
+            npy.to_str().unwrap(),
+            "--pitch-um",
+            "5",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        refused(&o, &["wrap.npy", "shape"], &out);
+    }
 }

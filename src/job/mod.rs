@@ -210,6 +210,16 @@ pub struct Ready {
 }
 
 impl Job {
+    /// The toolpath stage's configuration: `[toolpath]`, with the job's `name` in the program's header
+    /// unless `toolpath.job` names it.
+    pub fn toolpath_config(&self) -> ToolpathConfig {
+        let mut t = self.toolpath.clone();
+        if t.job == ToolpathConfig::default().job {
+            t.job = self.name.clone();
+        }
+        t
+    }
+
     /// Read a job file and check everything that can be checked before work starts.
     pub fn load(path: &Path) -> Result<Ready, JobError> {
         Job::load_with(path, &[])
@@ -327,6 +337,10 @@ impl Job {
             )));
         }
         check_work(&job, tool.radius_mm()).map_err(invalid)?;
+        // everything the toolpath stage checks without the tile, now rather than after the design
+        crate::toolpath::machine::program_text("name", &job.name).map_err(|e| invalid(e.to_string()))?;
+        crate::toolpath::check_config(&job.toolpath_config(), &machine, job.facets.pitch_um * 1e-3)
+            .map_err(|e| invalid(e.to_string()))?;
         job.verify.validate().map_err(|e| invalid(e.to_string()))?;
         let labels = match &job.svbrdf {
             Some(sv) => Some(read_labels(&job, sv, &regions, &dir).map_err(|e| invalid(e.to_string()))?),

@@ -8,7 +8,7 @@ use crate::facets::{self, Tile, TileFile};
 use crate::ndf::{self, Kernel, Ndf, NdfFile};
 use crate::simulate::{self, Deviation, SimFile, SimulateConfig, Simulation};
 use crate::tool::Shape;
-use crate::toolpath::{self, raster, ToolpathConfig};
+use crate::toolpath::{self, raster};
 use crate::verify::{self, report, Metrics, VerifyInput};
 use std::path::{Path, PathBuf};
 
@@ -434,10 +434,7 @@ fn toolpath_stage(
     o: &mut Out,
 ) -> Result<toolpath::Toolpath, JobError> {
     let job = &ready.job;
-    let mut tcfg = job.toolpath.clone();
-    if tcfg.job == ToolpathConfig::default().job {
-        tcfg.job = job.name.clone();
-    }
+    let tcfg = job.toolpath_config();
     let program = toolpath::run(&tcfg, design, &ready.machine).map_err(stage_err("toolpath"))?;
     o.write("program.nc", program.gcode.as_bytes())?;
     let summary = serde_json::to_string_pretty(&program.summary).map_err(stage_err("toolpath"))?;

@@ -39,6 +39,13 @@ pub fn check(moves: &[Move], start: P3, machine: &Machine, tool: &Tool) -> Resul
             Move::Feed(p, f) => {
                 let dxy = ((p[0] - at[0]).powi(2) + (p[1] - at[1]).powi(2)).sqrt();
                 let dz = (p[2] - at[2]).abs();
+                // feeds are written to 0.1 mm/min: below half of that the block would read `F0` (GRBL:
+                // error:22, or a stall)
+                if f.is_nan() || f < 0.05 {
+                    return Err(format!(
+                        "move {n}: feed {f} mm/min would be written as F0 (feeds are written to 0.1 mm/min)"
+                    ));
+                }
                 if dxy > 1e-12 && f > l.max_feed_mm_min + 1e-9 {
                     return Err(format!(
                         "move {n}: feed {f} mm/min exceeds limits.max_feed_mm_min = {} mm/min",

@@ -483,8 +483,12 @@ impl Machine {
             }
         }
         program_text("name", &self.name)?;
-        if self.program.spindle_dwell_s.is_nan() || self.program.spindle_dwell_s < 0.0 {
-            return Err(field("program.spindle_dwell_s", "≥ 0", self.program.spindle_dwell_s));
+        if !(0.0..=600.0).contains(&self.program.spindle_dwell_s) {
+            return Err(field(
+                "program.spindle_dwell_s",
+                "in [0, 600] s (a spindle is up to speed in seconds)",
+                self.program.spindle_dwell_s,
+            ));
         }
         if self.tools.is_empty() {
             return Err(field("tools", "at least one `[[tools]]` entry", "none"));

@@ -53,6 +53,7 @@ pub struct ToolpathConfig {
     /// Stock material, selects the cutting data.
     pub stock: Stock,
     /// Work area `[x, y]`, mm, covered by the tile repeated.
+    #[serde(deserialize_with = "crate::de::exact_pair")]
     pub area_mm: [f64; 2],
     /// Target scallop height of the finishing raster, µm.
     pub scallop_um: f64,
@@ -217,41 +218,10 @@ fn limit(field: &str, what: String) -> ToolpathError {
 }
 
 /// Bound the work before it starts (issue 13: a stepover of 1e-7 mm, a depth of cut of 1e-9 mm or a tool
-/// the size of the machine would run for hours or ask for terabytes): the design grid's cells, the finishing
-/// CL points and the layers of each tool, from the area, the tile's relief and the profile, each refused with
-/// the field that drives it and the estimate.
+/// the size of the machine would run for hours or ask for terabytes): beyond [`check_config`]'s design grid
+/// and CL points, the layers of each tool from the tile's relief and the profile, refused with the field
+/// that drives them and the estimate.
 fn bound_work(cfg: &ToolpathConfig, tile: &Heightfield, p: &Plan) -> Result<(), ToolpathError> {
-    let pitch = tile.pitch_mm;
-    let margin = p.tool.radius_mm().max(p.rough.radius_mm()) + 3.0 * pitch;
-    let diag = (p.area.0.powi(2) + p.area.1.powi(2)).sqrt();
-    let side = (diag + 2.0 * margin) / pitch + 2.0;
-    if side * side > MAX_GRID_CELLS {
-        return Err(limit(
-            "tools.diameter_mm / area_mm",
-            format!(
-                "the design grid would be about {:.3e} cells (area plus the tool radius {} mm on each side, at {} mm), above {MAX_GRID_CELLS:.0e}",
-                side * side,
-                p.tool.radius_mm().max(p.rough.radius_mm()),
-                pitch
-            ),
-        ));
-    }
-    let passes = diag / p.stepover + 1.0;
-    if passes * side > MAX_CL_POINTS {
-        let field = if cfg.stepover_mm > 0.0 {
-            "stepover_mm"
-        } else {
-            "scallop_um"
-        };
-        return Err(limit(
-            field,
-            format!(
-                "stepover {:.3e} mm gives about {passes:.3e} passes and {:.3e} CL points, above {MAX_CL_POINTS:.0e}",
-                p.stepover,
-                passes * side
-            ),
-        ));
-    }
     let relief = -tile.z_mm.iter().copied().fold(0.0, f64::min);
     for t in [p.rough, p.tool] {
         let doc = t.cutting(cfg.stock).max_depth_of_cut_mm;
@@ -269,15 +239,24 @@ fn bound_work(cfg: &ToolpathConfig, tile: &Heightfield, p: &Plan) -> Result<(), 
     Ok(())
 }
 
-/// Check the configuration against the machine and the tile; choose the tools, the stepover and the
-/// strategy, and bound the work.
-fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> Result<Plan<'a>, ToolpathError> {
+/// The least cutting feed override, mm/min: feeds are written to 0.1 mm/min and the reduced ones (entries,
+/// engagement) are fractions of the cutting feed, so a smaller one would be written as `F0`.
+pub const MIN_FEED_MM_MIN: f64 = 1.0;
+
+/// The largest collinear-point tolerance, µm (a quarter of a millimetre would flatten the facets).
+pub const MAX_TOLERANCE_UM: f64 = 250.0;
+
+/// Check what needs no tile: `cfg` against `machine` (the tools, the area within travel, the tolerance,
+/// the raster, the feed, the job name for the header) and the work its area and stepover ask for on a
+/// design grid of `pitch_mm`, so that a job refuses them before any stage runs. [`run`] checks the same
+/// before it plans.
+pub fn check_config(cfg: &ToolpathConfig, machine: &Machine, pitch_mm: f64) -> Result<(), ToolpathError> {
     let bad = |s: String| Err(ToolpathError::Config(s));
     machine::program_text("job", &cfg.job).map_err(ToolpathError::Profile)?;
     let tool = machine.tool(&cfg.tool)?;
     if !matches!(tool.shape, Shape::Ball { .. }) {
         return bad(format!(
-            "finishing needs a ball-nose tool; `{}` is {:?}",
+            "`tool`: finishing needs a ball-nose tool; `{}` is {:?}",
             tool.id,
             tool.shape.kind()
         ));
@@ -289,7 +268,7 @@ fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> R
     };
     let [ax, ay] = cfg.area_mm;
     if !(ax > 0.0 && ay > 0.0 && ax.is_finite() && ay.is_finite()) {
-        return bad(format!("area_mm must be positive, got {ax}×{ay}"));
+        return bad(format!("`area_mm` must be positive, got {ax}×{ay}"));
     }
     if ax > machine.travel.x_mm || ay > machine.travel.y_mm {
         return Err(ToolpathError::Machine(format!(
@@ -297,26 +276,93 @@ fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> R
             machine.travel.x_mm, machine.travel.y_mm
         )));
     }
-    if cfg.tolerance_um.is_nan() || cfg.tolerance_um < 0.0 || !cfg.angle_deg.is_finite() {
-        return bad("tolerance_um must be ≥ 0 and angle_deg finite".into());
+    if !(0.0..=MAX_TOLERANCE_UM).contains(&cfg.tolerance_um) {
+        return bad(format!(
+            "`tolerance_um` must be in [0, {MAX_TOLERANCE_UM}] µm, got {}",
+            cfg.tolerance_um
+        ));
     }
+    if !cfg.angle_deg.is_finite() {
+        return bad(format!("`angle_deg` must be a finite angle, got {}", cfg.angle_deg));
+    }
+    let f = cfg.feed_mm_min;
+    if f != 0.0 && !(f >= MIN_FEED_MM_MIN && f <= machine.limits.max_feed_mm_min) {
+        return bad(format!(
+            "`feed_mm_min` must be 0 (the tool's cutting data) or in [{MIN_FEED_MM_MIN}, {}] mm/min (limits.max_feed_mm_min), got {f}",
+            machine.limits.max_feed_mm_min
+        ));
+    }
+    let stepover = stepover_of(cfg, tool.radius_mm())?;
+    if !(pitch_mm.is_finite() && pitch_mm > 0.0) {
+        return bad(format!("the design grid's pitch must be positive, got {pitch_mm} mm"));
+    }
+    let margin = tool.radius_mm().max(rough.radius_mm()) + 3.0 * pitch_mm;
+    let diag = (ax * ax + ay * ay).sqrt();
+    let side = (diag + 2.0 * margin) / pitch_mm + 2.0;
+    if side * side > MAX_GRID_CELLS {
+        return Err(limit(
+            "tools.diameter_mm / area_mm",
+            format!(
+                "the design grid would be about {:.3e} cells (area plus the tool radius {} mm on each side, at {} mm), above {MAX_GRID_CELLS:.0e}",
+                side * side,
+                tool.radius_mm().max(rough.radius_mm()),
+                pitch_mm
+            ),
+        ));
+    }
+    let passes = diag / stepover + 1.0;
+    if passes * side > MAX_CL_POINTS {
+        let field = if cfg.stepover_mm > 0.0 {
+            "stepover_mm"
+        } else {
+            "scallop_um"
+        };
+        return Err(limit(
+            field,
+            format!(
+                "stepover {stepover:.3e} mm gives about {passes:.3e} passes and {:.3e} CL points, above {MAX_CL_POINTS:.0e}",
+                passes * side
+            ),
+        ));
+    }
+    Ok(())
+}
+
+/// The finishing stepover, mm: `stepover_mm` when given, else the one that leaves `scallop_um` with a ball
+/// of radius `r_mm`.
+fn stepover_of(cfg: &ToolpathConfig, r_mm: f64) -> Result<f64, ToolpathError> {
+    let bad = |s: String| Err(ToolpathError::Config(s));
+    if cfg.stepover_mm > 0.0 && cfg.stepover_mm.is_finite() {
+        Ok(cfg.stepover_mm)
+    } else if cfg.stepover_mm != 0.0 {
+        bad(format!("`stepover_mm` must be ≥ 0 and finite, got {}", cfg.stepover_mm))
+    } else if cfg.scallop_um > 0.0 && cfg.scallop_um * 1e-3 < r_mm {
+        Ok(raster::stepover_for_scallop(r_mm, cfg.scallop_um * 1e-3))
+    } else {
+        bad(format!(
+            "`scallop_um` must be in (0, {}) for this tool, got {}",
+            r_mm * 1000.0,
+            cfg.scallop_um
+        ))
+    }
+}
+
+/// Check the configuration against the machine and the tile; choose the tools, the stepover and the
+/// strategy, and bound the work.
+fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> Result<Plan<'a>, ToolpathError> {
+    let bad = |s: String| Err(ToolpathError::Config(s));
+    check_config(cfg, machine, tile.pitch_mm)?;
+    let tool = machine.tool(&cfg.tool)?;
+    let rough = if cfg.rough_tool.is_empty() {
+        tool
+    } else {
+        machine.tool(&cfg.rough_tool)?
+    };
+    let [ax, ay] = cfg.area_mm;
     if !tile.periodic {
         return bad("the design heightfield must be periodic (a tile) to repeat over the area".into());
     }
-    let r = tool.radius_mm();
-    let stepover = if cfg.stepover_mm > 0.0 && cfg.stepover_mm.is_finite() {
-        cfg.stepover_mm
-    } else if cfg.stepover_mm != 0.0 {
-        return bad(format!("stepover_mm must be ≥ 0 and finite, got {}", cfg.stepover_mm));
-    } else if cfg.scallop_um > 0.0 && cfg.scallop_um * 1e-3 < r {
-        raster::stepover_for_scallop(r, cfg.scallop_um * 1e-3)
-    } else {
-        return bad(format!(
-            "scallop_um must be in (0, {}) for this tool, got {}",
-            r * 1000.0,
-            cfg.scallop_um
-        ));
-    };
+    let stepover = stepover_of(cfg, tool.radius_mm())?;
     let cut = tool.cutting(cfg.stock);
     let feed = if cfg.feed_mm_min > 0.0 {
         cfg.feed_mm_min
