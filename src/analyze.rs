@@ -172,8 +172,11 @@ fn load(path: &Path, cfg: &Config) -> Result<Loaded, AnalyzeError> {
             let pitch = cfg
                 .pitch_um
                 .ok_or_else(|| input("a .npy heightfield needs --pitch-um".into()))?;
-            if !(pitch.is_finite() && pitch > 0.0) {
-                return Err(input(format!("--pitch-um must be positive, got {pitch}")));
+            // from an atomic-force scan's nanometres to a coarse profilometer's tenth of a metre
+            if !(1e-3..=1e5).contains(&pitch) {
+                return Err(input(format!(
+                    "--pitch-um must be in [0.001, 100000] µm, got {pitch:e}"
+                )));
             }
             let (ny, nx, z) = crate::npy::read_f64_2d(path)?;
             let valid: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
@@ -296,6 +299,15 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
         cov[1][1] += dq * dq / n;
     }
     cov[1][0] = cov[0][1];
+    let finite = |v: &[f64]| v.iter().all(|x| x.is_finite());
+    if !(rms.is_finite() && finite(&hf.z_mm) && finite(&[cov[0][0], cov[0][1], cov[1][1]])) {
+        // heights of 1e300, or a plane through them, overflow: no figure of such a surface means anything
+        return Err(bad(format!(
+            "heights (after removing the best-fit plane) or their slopes at a {} µm pitch overflow a 64-bit \
+             float (rms {rms:e} µm): the heights must be in mm, and finite",
+            hf.pitch_mm * 1e3
+        )));
+    }
     let mut mags: Vec<f64> = slopes.iter().map(|(p, q)| p.abs().max(q.abs())).collect();
     mags.sort_by(f64::total_cmp);
     let p99 = mags[((mags.len() - 1) as f64 * 0.99) as usize];

@@ -344,17 +344,9 @@ fn an_npy_shape_that_wraps_is_refused() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
     for shape in ["(4611686018427388928, 4)", "(4294967296, 4294967296)"] {
-        let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}");
-        while (10 + header.len() + 1) % 64 != 0 {
-            header.push(' ');
-        }
-        header.push('\n');
-        let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-        bytes.extend((header.len() as u16).to_le_bytes());
-        bytes.extend(header.as_bytes());
-        bytes.extend((0..4096).flat_map(|k| (k as f64 * 1e-3).to_le_bytes()));
+        let values: Vec<f64> = (0..4096).map(|k| k as f64 * 1e-3).collect();
         let npy = dir.path().join("wrap.npy");
-        std::fs::write(&npy, bytes).unwrap();
+        std::fs::write(&npy, npy_bytes(shape, &values)).unwrap();
         let o = brdfmill(&[
             "analyze",
             npy.to_str().unwrap(),
@@ -365,4 +357,75 @@ fn an_npy_shape_that_wraps_is_refused() {
         ]);
         refused(&o, &["wrap.npy", "shape"], &out);
     }
+}
+
+/// A little-endian float64 .npy of `shape` (its text, e.g. `(64, 64)`) holding `values`.
+fn npy_bytes(shape: &str, values: &[f64]) -> Vec<u8> {
+    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend((header.len() as u16).to_le_bytes());
+    bytes.extend(header.as_bytes());
+    bytes.extend(values.iter().flat_map(|v| v.to_le_bytes()));
+    bytes
+}
+
+/// Heights so large that their plane or slopes overflow (1e300 mm; big-endian data read as little can
+/// read as such) used to give NaN figures, a report and exit 0; a pitch of 1e300 µm the same. Both are
+/// refused, naming the file.
+#[test]
+fn a_surface_whose_figures_would_overflow_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let huge: Vec<f64> = (0..64 * 64).map(|k| (k % 64) as f64 * 1e300).collect();
+    let npy = dir.path().join("huge.npy");
+    std::fs::write(&npy, npy_bytes("(64, 64)", &huge)).unwrap();
+    let o = brdfmill(&[
+        "analyze",
+        npy.to_str().unwrap(),
+        "--pitch-um",
+        "5",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    refused(&o, &["huge.npy", "overflow"], &out);
+    let fine: Vec<f64> = (0..64 * 64).map(|k| ((k % 64) as f64 * 0.3).sin() * 1e-3).collect();
+    std::fs::write(&npy, npy_bytes("(64, 64)", &fine)).unwrap();
+    for pitch in ["1e300", "1e-300"] {
+        let o = brdfmill(&[
+            "analyze",
+            npy.to_str().unwrap(),
+            "--pitch-um",
+            pitch,
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        refused(&o, &["huge.npy", "--pitch-um"], &out);
+    }
+}
+
+/// `simulate --max-cells` raised past what memory holds (it once asked for 3.2 PB and aborted with exit
+/// 134) is refused, naming the option.
+#[test]
+fn a_stock_limit_beyond_memory_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let nc = dir.path().join("p.nc");
+    std::fs::write(&nc, "G21 G90\nG0 X0 Y0 Z1\nG1 Z-0.1 F100\nX1\n").unwrap();
+    let out = dir.path().join("out");
+    let o = brdfmill(&[
+        "simulate",
+        nc.to_str().unwrap(),
+        "--tool",
+        "ball:1",
+        "--pitch-um",
+        "0.0001",
+        "--max-cells",
+        "18446744073709551615",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    refused(&o, &["p.nc", "max_cells"], &out);
 }

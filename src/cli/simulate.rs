@@ -30,7 +30,7 @@ pub struct Args {
     /// Flute length (mm): refuse a program whose tip goes deeper below the stock top; default: not checked
     #[arg(long)]
     pub flute_length_mm: Option<f64>,
-    /// Largest stock grid, cells (8 bytes each)
+    /// Largest stock grid, cells (8 bytes each; at most 1e9)
     #[arg(long, default_value_t = 250_000_000)]
     pub max_cells: usize,
     /// Machine profile (a path or a shipped name such as grbl-3018) whose limits the time estimate uses; default: machines/linuxcnc-mill.toml's

@@ -65,6 +65,11 @@ pub struct ToolCut {
     pub segments: usize,
 }
 
+/// The largest `max_cells` may be raised to: a stock of 10⁹ cells is 8 GB, and the deviation map, the
+/// images and the files written from it hold as much again (a larger one failed its allocation and
+/// aborted instead of being refused).
+pub const MAX_CELLS_CEILING: usize = 1_000_000_000;
+
 /// Configuration of the simulation. Lengths carry their unit in the name.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -155,6 +160,13 @@ impl SimulateConfig {
         }
         if self.flute_length_mm.is_nan() || self.flute_length_mm < 0.0 {
             return bad(format!("flute_length_mm must be ≥ 0, got {}", self.flute_length_mm));
+        }
+        if self.max_cells > MAX_CELLS_CEILING {
+            return bad(format!(
+                "max_cells may be raised to {MAX_CELLS_CEILING} at most (8 bytes each, and the deviation, \
+                 images and files hold more), got {}",
+                self.max_cells
+            ));
         }
         Ok(())
     }
