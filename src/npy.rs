@@ -33,6 +33,33 @@ pub fn write_f64_2d(path: &Path, rows: usize, cols: usize, data: &[f64]) -> Resu
     })
 }
 
+/// The dimensions written in a .npy header's `'shape': (…)`, as text (`None` for one that is not a plain
+/// whole number); `None` when the header cannot be found, which the full reader then reports.
+fn header_shape(bytes: &[u8]) -> Option<Vec<Option<String>>> {
+    if bytes.len() < 10 || &bytes[..6] != b"\x93NUMPY" {
+        return None;
+    }
+    let (start, len): (usize, usize) = match bytes[6] {
+        1 => (10, u16::from_le_bytes([bytes[8], bytes[9]]) as usize),
+        _ if bytes.len() >= 12 => (
+            12,
+            u32::from_le_bytes([bytes[8], bytes[9], bytes[10], bytes[11]]) as usize,
+        ),
+        _ => return None,
+    };
+    let header = std::str::from_utf8(bytes.get(start..start.checked_add(len)?)?).ok()?;
+    let after = &header[header.find("'shape'")?..];
+    let inner = &after[after.find('(')? + 1..after.find(')')?];
+    Some(
+        inner
+            .split(',')
+            .map(str::trim)
+            .filter(|d| !d.is_empty())
+            .map(|d| d.chars().all(|c| c.is_ascii_digit()).then(|| d.to_string()))
+            .collect(),
+    )
+}
+
 /// Read a 2D `f64` array (C order); returns `(rows, cols, data)`.
 pub fn read_f64_2d(path: &Path) -> Result<(usize, usize, Vec<f64>), NpyError> {
     let bytes = crate::io::read(path)?;
@@ -40,6 +67,23 @@ pub fn read_f64_2d(path: &Path) -> Result<(usize, usize, Vec<f64>), NpyError> {
         path: path.to_path_buf(),
         reason,
     };
+    // npyz multiplies the header's shape unchecked (a panic or a wrap when it overflows): checked first
+    if let Some(dims) = header_shape(&bytes) {
+        let count = dims.iter().try_fold(1usize, |n, d| {
+            d.as_deref()
+                .and_then(|d| d.parse::<usize>().ok())
+                .and_then(|d| n.checked_mul(d))
+        });
+        if count.is_none() {
+            return Err(fmt(format!(
+                "shape ({}) has more values than this machine can address",
+                dims.iter()
+                    .map(|d| d.as_deref().unwrap_or("?"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )));
+        }
+    }
     let npy = npyz::NpyFile::new(&bytes[..]).map_err(|e| fmt(format!("not a .npy file: {e}")))?;
     let shape = npy.shape().to_vec();
     if shape.len() != 2 {

@@ -429,3 +429,44 @@ fn a_stock_limit_beyond_memory_is_refused() {
     ]);
     refused(&o, &["p.nc", "max_cells"], &out);
 }
+
+/// An output that cannot be written where it is asked for (a file path that is a folder, a folder path
+/// that is a file) is refused before any work: `ndf --png DIR` used to write ndf.json first.
+#[test]
+fn outputs_that_cannot_be_written_are_refused_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let json = dir.path().join("x.json");
+    let o = brdfmill(&[
+        "ndf",
+        "--brdf",
+        "beckmann:alpha=0.2",
+        "--res",
+        "32",
+        "--out",
+        json.to_str().unwrap(),
+        "--png",
+        dir.path().to_str().unwrap(),
+    ]);
+    assert_eq!(o.status.code(), Some(1));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("--png"));
+    assert!(!json.exists(), "ndf.json was written before the refusal");
+    let file = dir.path().join("a-file");
+    std::fs::write(&file, "x").unwrap();
+    let nc = dir.path().join("p.nc");
+    std::fs::write(&nc, "G21 G90\nG0 X0 Y0 Z1\nG1 Z-0.1 F100\nX1\n").unwrap();
+    for out in [file.clone(), file.join("sub")] {
+        let o = brdfmill(&[
+            "simulate",
+            nc.to_str().unwrap(),
+            "--tool",
+            "ball:1",
+            "--out",
+            out.to_str().unwrap(),
+        ]);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert!(
+            o.status.code() == Some(1) && err.contains("--out") && err.contains("is a file"),
+            "{err}"
+        );
+    }
+}

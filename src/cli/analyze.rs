@@ -29,6 +29,7 @@ pub struct Args {
 
 /// Run `brdfmill analyze`.
 pub fn run(a: &Args) -> Result<()> {
+    super::check_out_dir("--out", &a.out)?;
     let cfg = Config {
         pitch_um: a.pitch_um,
         wavelength_um: a.wavelength_um,

@@ -39,6 +39,7 @@ pub struct Args {
 
 /// Run the subcommand.
 pub fn run(a: &Args) -> Result<()> {
+    super::check_out_dir("--out", &a.out)?;
     let (w, h) = super::parse_pair::<usize>(&a.facets, "--facets", "WxH, e.g. 32x32")?;
     let steep = match a.steep.as_str() {
         "truncate" => SteepPolicy::Truncate,

@@ -64,3 +64,32 @@ pub fn parse_pair<T: std::str::FromStr>(s: &str, option: &str, form: &str) -> an
     };
     Ok((parse(a)?, parse(b)?))
 }
+
+/// Refuse, before any work, an output file `path` (given by `option`) that cannot be written: an existing
+/// folder, or a path under an existing file.
+pub fn check_out_file(option: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    if path.is_dir() {
+        anyhow::bail!("{option} {}: is a folder; expected the path of a file", path.display());
+    }
+    under_a_file(option, path)
+}
+
+/// Refuse, before any work, an output folder `path` (given by `option`) that cannot be made: an existing
+/// file, or a path under one.
+pub fn check_out_dir(option: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    if path.exists() && !path.is_dir() {
+        anyhow::bail!(
+            "{option} {}: is a file; expected a folder (made when missing)",
+            path.display()
+        );
+    }
+    under_a_file(option, path)
+}
+
+/// A path whose existing ancestor is a file cannot be created.
+fn under_a_file(option: &str, path: &std::path::Path) -> anyhow::Result<()> {
+    if let Some(f) = path.ancestors().skip(1).find(|a| a.is_file()) {
+        anyhow::bail!("{option} {}: {} is a file, not a folder", path.display(), f.display());
+    }
+    Ok(())
+}

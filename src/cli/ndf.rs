@@ -51,6 +51,10 @@ pub struct Args {
 
 /// Run the subcommand.
 pub fn run(a: &Args) -> Result<()> {
+    super::check_out_file("--out", &a.out)?;
+    if let Some(p) = &a.png {
+        super::check_out_file("--png", p)?;
+    }
     let cfg = NdfConfig {
         res: a.res,
         max_angle_deg: a.max_angle_deg,

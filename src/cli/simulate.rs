@@ -87,6 +87,7 @@ pub fn config(a: &Args) -> Result<SimulateConfig> {
 
 /// Run the subcommand.
 pub fn run(a: &Args) -> Result<()> {
+    super::check_out_dir("--out", &a.out)?;
     let cfg = config(a)?;
     let text = std::fs::read_to_string(&a.program).with_context(|| format!("cannot read {}", a.program.display()))?;
     let design = match &a.design {

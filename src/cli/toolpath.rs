@@ -84,6 +84,7 @@ pub fn config(a: &Args) -> Result<ToolpathConfig> {
 
 /// Run the subcommand.
 pub fn run(a: &Args) -> Result<()> {
+    super::check_out_file("--out", &a.out)?;
     let cfg = config(a)?;
     let (_, machine) = Machine::find(&a.machine.to_string_lossy(), std::path::Path::new(""))?;
     let tile = TileFile::read(&a.tile)?;
