@@ -186,13 +186,19 @@ fn limit_violations_are_refused() {
         stepover_mm: 0.2,
         ..Default::default()
     };
+    // (refused with the configuration, before any planning)
     match toolpath::run(&cfg, &small, &m) {
-        Err(ToolpathError::Machine(e)) => assert!(e.contains("exceeds limits.max_feed_mm_min"), "{e}"),
+        Err(ToolpathError::Config(e)) => assert!(e.contains("feed_mm_min") && e.contains("1000"), "{e}"),
         other => panic!("expected a feed refusal, got {:?}", other.map(|p| p.summary)),
     }
-    // a rapid into the stock, and a rapid across X/Y below safe z
+    // the machine check refuses the same in a move list, and a feed that would be written as F0
     let tool = m.tool("ball1").unwrap();
     let start = [0.0, 0.0, 3.0];
+    let e = check::check(&[Move::Feed([1.0, 0.0, 3.0], 5000.0)], start, &m, tool).unwrap_err();
+    assert!(e.contains("exceeds limits.max_feed_mm_min"), "{e}");
+    let e = check::check(&[Move::Feed([1.0, 0.0, 3.0], 0.04)], start, &m, tool).unwrap_err();
+    assert!(e.contains("F0"), "{e}");
+    // a rapid into the stock, and a rapid across X/Y below safe z
     let e = check::check(&[Move::Rapid([0.0, 0.0, -0.2])], start, &m, tool).unwrap_err();
     assert!(e.contains("into the stock"), "{e}");
     let e = check::check(

@@ -329,13 +329,13 @@ pub enum MachineError {
     /// The file could not be read.
     #[error(transparent)]
     Read(#[from] crate::io::ReadError),
-    /// The file's content is wrong.
+    /// The file's content is wrong (the message is the field's own, so it is not also a `source`: a
+    /// chain printed with `{:#}` gave it twice).
     #[error("{path}: {error}")]
     Profile {
         /// The profile file.
         path: String,
         /// What is wrong, naming the field.
-        #[source]
         error: ProfileError,
     },
     /// Neither a file nor the name of a shipped profile.
