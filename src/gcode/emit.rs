@@ -87,11 +87,21 @@ pub fn comment_text(s: &str) -> String {
     out
 }
 
-/// One comment line: `(text)`, at most 78 characters.
+/// The text as comment lines `(…)` of at most 78 characters (a controller's line buffer holds 80: GRBL's
+/// would drop the rest), joined by newlines: a longer text goes on in the next lines, broken after a space
+/// when one is within the line, so that no word is cut (a cut once read "82020 bloc").
 fn comment_line(text: &str) -> String {
-    let mut clean = comment_text(text);
-    clean.truncate(76);
-    format!("({clean})")
+    let clean = comment_text(text);
+    let mut rest = clean.trim();
+    let mut lines = vec![];
+    while rest.len() > 76 {
+        // ASCII after `comment_text`: any byte index is a character boundary
+        let cut = rest[..=76].rfind(' ').filter(|&k| k > 0).unwrap_or(76);
+        lines.push(format!("({})", rest[..cut].trim_end()));
+        rest = rest[cut..].trim_start();
+    }
+    lines.push(format!("({rest})"));
+    lines.join("\n")
 }
 
 /// What the writer needs besides the moves.
@@ -474,5 +484,27 @@ mod tests {
         let g = emit(&setup(Dialect::Grbl, &["evil\nG0 Z-40\nG1 X100 F5000\n;".into()]), &[]);
         assert_eq!(g.lines().next().unwrap(), "(evil G0 Z-40 G1 X100 F5000 ,)");
         assert!(!g.lines().any(|l| l.starts_with("G0 Z-40")));
+    }
+
+    /// A header line longer than a comment line goes on in the next, broken between words: every line
+    /// within 78 characters, the words read back whole and in order.
+    #[test]
+    fn a_long_comment_wraps_between_words() {
+        let text = "estimated run time 2:27:32 [2:27:45 at the planner's block rate], 82020 blocks of \
+                    motion, and a word longer than any line: "
+            .to_string()
+            + &"x".repeat(100);
+        let g = emit(&setup(Dialect::Grbl, std::slice::from_ref(&text)), &[]);
+        let lines: Vec<&str> = g.lines().take_while(|l| l.starts_with('(')).collect();
+        assert!(lines.len() >= 3, "{g}");
+        assert!(lines.iter().all(|l| l.len() <= 78 && l.ends_with(')')), "{lines:?}");
+        let words: Vec<&str> = lines
+            .iter()
+            .flat_map(|l| l.trim_start_matches('(').trim_end_matches(')').split_whitespace())
+            .collect();
+        let want: Vec<String> = comment_text(&text).split_whitespace().map(String::from).collect();
+        // the over-long word alone is cut, at 76 characters
+        assert_eq!(words[..words.len() - 2].join(" "), want[..want.len() - 1].join(" "));
+        assert_eq!(words[words.len() - 2..].concat(), "x".repeat(100));
     }
 }

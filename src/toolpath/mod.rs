@@ -707,9 +707,10 @@ fn header(f: &HeaderFacts) -> Vec<String> {
             f.stepover, f.scallop, cfg.angle_deg, f.strategy
         ),
         format!(
-            "finish: F{} plunge {} S{} chip {chip_um:.2} um/tooth, doc {} mm, {} extra levels",
-            f.feed, cut.plunge_mm_min, cut.spindle_rpm, cut.max_depth_of_cut_mm, f.levels
+            "finish: F{} plunge {} S{} chip {chip_um:.2} um/tooth, doc {} mm",
+            f.feed, cut.plunge_mm_min, cut.spindle_rpm, cut.max_depth_of_cut_mm
         ),
+        format!("finish: {} intermediate levels before the final raster", f.levels),
     ];
     if f.layers > 0 {
         h.push(format!(
@@ -734,7 +735,7 @@ fn header(f: &HeaderFacts) -> Vec<String> {
         f.depth, cfg.tolerance_um
     ));
     h.push(format!(
-        "estimated run time {} ({} at the planner's block rate), {} blocks",
+        "estimated run time {} ({} at the block rate), {} blocks",
         hms(f.est.s),
         hms(f.est.block_limited_s),
         f.est.blocks
