@@ -286,15 +286,7 @@ fn rgl_files_that_would_be_misread_are_refused() {
 fn a_float32_npy_names_its_path_once() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("f32.npy");
-    let header = "{'descr': '<f4', 'fortran_order': False, 'shape': (4, 4), }";
-    // magic (6) + version (2) + length (2) + header: a multiple of 64 bytes, the header ending in a newline
-    let mut h = format!("{header:<117}");
-    h.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&(h.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(h.as_bytes());
-    bytes.extend_from_slice(&[0u8; 64]);
-    std::fs::write(&p, bytes).unwrap();
+    std::fs::write(&p, npy_bytes("<f4", "(4, 4)", &[0u8; 64])).unwrap();
     let out = dir.path().join("a");
     let o = brdfmill(&[
         "analyze",
@@ -346,7 +338,7 @@ fn an_npy_shape_that_wraps_is_refused() {
     for shape in ["(4611686018427388928, 4)", "(4294967296, 4294967296)"] {
         let values: Vec<f64> = (0..4096).map(|k| k as f64 * 1e-3).collect();
         let npy = dir.path().join("wrap.npy");
-        std::fs::write(&npy, npy_bytes(shape, &values)).unwrap();
+        std::fs::write(&npy, npy_f64(shape, &values)).unwrap();
         let o = brdfmill(&[
             "analyze",
             npy.to_str().unwrap(),
@@ -359,9 +351,10 @@ fn an_npy_shape_that_wraps_is_refused() {
     }
 }
 
-/// A little-endian float64 .npy of `shape` (its text, e.g. `(64, 64)`) holding `values`.
-fn npy_bytes(shape: &str, values: &[f64]) -> Vec<u8> {
-    let mut header = format!("{{'descr': '<f8', 'fortran_order': False, 'shape': {shape}, }}");
+/// A .npy (version 1.0) of type `descr` and `shape` (their header text, e.g. `<f8` and `(64, 64)`) holding
+/// `payload`: magic (6) + version (2) + length (2) + header, a multiple of 64 bytes ending in a newline.
+fn npy_bytes(descr: &str, shape: &str, payload: &[u8]) -> Vec<u8> {
+    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': {shape}, }}");
     while (10 + header.len() + 1) % 64 != 0 {
         header.push(' ');
     }
@@ -369,8 +362,14 @@ fn npy_bytes(shape: &str, values: &[f64]) -> Vec<u8> {
     let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
     bytes.extend((header.len() as u16).to_le_bytes());
     bytes.extend(header.as_bytes());
-    bytes.extend(values.iter().flat_map(|v| v.to_le_bytes()));
+    bytes.extend(payload);
     bytes
+}
+
+/// A little-endian float64 .npy of `shape` holding `values`.
+fn npy_f64(shape: &str, values: &[f64]) -> Vec<u8> {
+    let payload: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+    npy_bytes("<f8", shape, &payload)
 }
 
 /// Heights so large that their plane or slopes overflow (1e300 mm; big-endian data read as little can
@@ -382,7 +381,7 @@ fn a_surface_whose_figures_would_overflow_is_refused() {
     let out = dir.path().join("out");
     let huge: Vec<f64> = (0..64 * 64).map(|k| (k % 64) as f64 * 1e300).collect();
     let npy = dir.path().join("huge.npy");
-    std::fs::write(&npy, npy_bytes("(64, 64)", &huge)).unwrap();
+    std::fs::write(&npy, npy_f64("(64, 64)", &huge)).unwrap();
     let o = brdfmill(&[
         "analyze",
         npy.to_str().unwrap(),
@@ -393,7 +392,7 @@ fn a_surface_whose_figures_would_overflow_is_refused() {
     ]);
     refused(&o, &["huge.npy", "overflow"], &out);
     let fine: Vec<f64> = (0..64 * 64).map(|k| ((k % 64) as f64 * 0.3).sin() * 1e-3).collect();
-    std::fs::write(&npy, npy_bytes("(64, 64)", &fine)).unwrap();
+    std::fs::write(&npy, npy_f64("(64, 64)", &fine)).unwrap();
     for pitch in ["1e300", "1e-300"] {
         let o = brdfmill(&[
             "analyze",

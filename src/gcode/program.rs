@@ -284,6 +284,14 @@ impl Program {
                 what,
                 text: (*s).to_string(),
             };
+            // A control character in a line is never G-code: it is a corrupted file or text injected into it
+            // (GRBL would drop it silently and run the rest of the line).
+            if let Some(c) = s.chars().find(|c| c.is_control() && *c != '\t' && *c != '\r') {
+                return Err(syntax(format!(
+                    "control character U+{:04X}: a program line holds printable text only",
+                    u32::from(c)
+                )));
+            }
             let raw = clean_keeping_percent(s);
             if let Some((at, what)) = end.filter(|_| !raw.is_empty() && raw != "%") {
                 // GRBL would run it; the simulation, and so the verification, never read it
@@ -300,15 +308,8 @@ impl Program {
             } else if !raw.is_empty() {
                 content = true;
             }
-            // A control character in a line is never G-code: it is a corrupted file or text injected into it
-            // (GRBL would drop it silently and run the rest of the line).
-            if let Some(c) = s.chars().find(|c| c.is_control() && *c != '\t' && *c != '\r') {
-                return Err(syntax(format!(
-                    "control character U+{:04X}: a program line holds printable text only",
-                    u32::from(c)
-                )));
-            }
-            let cleaned = clean(s);
+            // `clean`, from the text already cleaned above
+            let cleaned = if raw == "%" { String::new() } else { raw };
             let (kind, block) = if cleaned.is_empty() {
                 (LineKind::Empty, cleaned)
             } else if cleaned.starts_with('$') {

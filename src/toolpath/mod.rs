@@ -251,6 +251,16 @@ pub const MAX_TOLERANCE_UM: f64 = 250.0;
 /// design grid of `pitch_mm`, so that a job refuses them before any stage runs. [`run`] checks the same
 /// before it plans.
 pub fn check_config(cfg: &ToolpathConfig, machine: &Machine, pitch_mm: f64) -> Result<(), ToolpathError> {
+    checked(cfg, machine, pitch_mm).map(|_| ())
+}
+
+/// [`check_config`], returning what it found for [`plan`]: the finishing and roughing tools and the
+/// stepover, mm.
+fn checked<'a>(
+    cfg: &ToolpathConfig,
+    machine: &'a Machine,
+    pitch_mm: f64,
+) -> Result<(&'a Tool, &'a Tool, f64), ToolpathError> {
     let bad = |s: String| Err(ToolpathError::Config(s));
     machine::program_text("job", &cfg.job).map_err(ToolpathError::Profile)?;
     let tool = machine.tool(&cfg.tool)?;
@@ -325,7 +335,7 @@ pub fn check_config(cfg: &ToolpathConfig, machine: &Machine, pitch_mm: f64) -> R
             ),
         ));
     }
-    Ok(())
+    Ok((tool, rough, stepover))
 }
 
 /// The finishing stepover, mm: `stepover_mm` when given, else the one that leaves `scallop_um` with a ball
@@ -351,18 +361,11 @@ fn stepover_of(cfg: &ToolpathConfig, r_mm: f64) -> Result<f64, ToolpathError> {
 /// strategy, and bound the work.
 fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> Result<Plan<'a>, ToolpathError> {
     let bad = |s: String| Err(ToolpathError::Config(s));
-    check_config(cfg, machine, tile.pitch_mm)?;
-    let tool = machine.tool(&cfg.tool)?;
-    let rough = if cfg.rough_tool.is_empty() {
-        tool
-    } else {
-        machine.tool(&cfg.rough_tool)?
-    };
+    let (tool, rough, stepover) = checked(cfg, machine, tile.pitch_mm)?;
     let [ax, ay] = cfg.area_mm;
     if !tile.periodic {
         return bad("the design heightfield must be periodic (a tile) to repeat over the area".into());
     }
-    let stepover = stepover_of(cfg, tool.radius_mm())?;
     let cut = tool.cutting(cfg.stock);
     let feed = if cfg.feed_mm_min > 0.0 {
         cfg.feed_mm_min
