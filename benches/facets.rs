@@ -1,6 +1,6 @@
 //! Facets stage benchmarks: periodic Poisson integration at 1024² and 2048², and annealing swaps.
 
-use brdfmill::facets::{Arrangement, PoissonSolver};
+use brdfmill::stages::facets::{Arrangement, PoissonSolver};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use rand::{Rng, SeedableRng};
 

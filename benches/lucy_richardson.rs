@@ -1,8 +1,8 @@
 //! Lucy–Richardson at 256² × 100 iterations with a Beckmann α = 0.1 base lobe (the kernel the `ndf` stage
 //! builds for `--base beckmann:alpha=0.1`).
 
-use brdfmill::brdf::Brdf;
-use brdfmill::ndf::{self, LucyRichardson, NdfConfig};
+use brdfmill::stages::brdf::Brdf;
+use brdfmill::stages::ndf::{self, LucyRichardson, NdfConfig};
 use criterion::{criterion_group, criterion_main, Criterion};
 
 fn bench(c: &mut Criterion) {

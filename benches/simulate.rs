@@ -1,7 +1,7 @@
 //! Sweep throughput in swept cells per second: a zigzag finishing raster (1 mm ball, 0.063 mm stepover,
 //! points every 10 µm over a wavy surface) across 2×2 mm of stock at 5 µm.
 
-use brdfmill::simulate::{self, Shape, SimulateConfig};
+use brdfmill::stages::simulate::{self, Shape, SimulateConfig};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use std::fmt::Write;
 

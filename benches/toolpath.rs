@@ -1,8 +1,8 @@
 //! Drop-cutter throughput: CL points per second for a 1024² heightfield with a 1 mm ball at 10 µm pitch.
 
-use brdfmill::heightfield::Heightfield;
-use brdfmill::tool::Shape;
-use brdfmill::toolpath::dropcutter::{DropCutter, Edge};
+use brdfmill::base::heightfield::Heightfield;
+use brdfmill::cut::dropcutter::{DropCutter, Edge};
+use brdfmill::cut::tool::Shape;
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 fn bench(c: &mut Criterion) {

@@ -1,9 +1,9 @@
 //! Wave-optics throughput: one FFT slice at 1024² (one coherence window, three 2D FFTs plus resampling)
 //! and Gabor-kernel evaluations (one direction over the ≈ 266k texel kernels (λ/4 texels) of one σ = 10 µm window).
 
-use brdfmill::geometry::{spherical, Vec3};
-use brdfmill::heightfield::Heightfield;
-use brdfmill::optics::wave::{self, GaborWindow, OpticalSurface, WaveConfig, Xi3};
+use brdfmill::base::geometry::{spherical, Vec3};
+use brdfmill::base::heightfield::Heightfield;
+use brdfmill::stages::optics::wave::{self, GaborWindow, OpticalSurface, WaveConfig, Xi3};
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 
 fn surface() -> OpticalSurface {

@@ -2,7 +2,7 @@
 //! measurement behind the default `step_weight`: rms step, relief, C and valleys over seeds 1–5 on the
 //! default target. `cargo run --release --example bench_anneal [-- table]`.
 
-use brdfmill::{brdf::Brdf, facets, ndf};
+use brdfmill::stages::{brdf::Brdf, facets, ndf};
 
 fn main() {
     let n = ndf::run(

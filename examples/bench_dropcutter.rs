@@ -5,9 +5,9 @@
 //!
 //! `cargo run --release --example bench_dropcutter -- [N] [DUMP_DIR]`
 
-use brdfmill::heightfield::Heightfield;
-use brdfmill::tool::Shape;
-use brdfmill::toolpath::dropcutter::{DropCutter, Edge};
+use brdfmill::base::heightfield::Heightfield;
+use brdfmill::cut::dropcutter::{DropCutter, Edge};
+use brdfmill::cut::tool::Shape;
 use std::time::Instant;
 
 /// A smooth random-looking periodic surface (sum of sinusoids), 0.2 mm deep.

@@ -17,11 +17,11 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use brdfmill::stream::emulator::{Emulator, EmulatorConfig, Fault, FaultAt, FaultKind};
-use brdfmill::stream::journal::Journal;
-use brdfmill::stream::program::{MotionMode, Program};
-use brdfmill::stream::serial::SerialLink;
-use brdfmill::stream::session::{self, Config, Mode, Outcome, Silent};
+use brdfmill::apps::stream::emulator::{Emulator, EmulatorConfig, Fault, FaultAt, FaultKind};
+use brdfmill::apps::stream::journal::Journal;
+use brdfmill::apps::stream::program::{MotionMode, Program};
+use brdfmill::apps::stream::serial::SerialLink;
+use brdfmill::apps::stream::session::{self, Config, Mode, Outcome, Silent};
 
 const BAUD: u32 = 1_000_000;
 

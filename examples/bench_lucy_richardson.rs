@@ -4,8 +4,8 @@
 //! `cargo run --release --example bench_lucy_richardson -- [RUNS] [DUMP_DIR]` — with DUMP_DIR, also writes
 //! `observed.npy` and `kernel.npy` so `scripts/bench_lr_vs_skimage.py` runs scikit-image on the same arrays.
 
-use brdfmill::brdf::Brdf;
-use brdfmill::ndf::{self, LucyRichardson, NdfConfig};
+use brdfmill::stages::brdf::Brdf;
+use brdfmill::stages::ndf::{self, LucyRichardson, NdfConfig};
 use std::time::Instant;
 
 fn main() {
@@ -18,8 +18,8 @@ fn main() {
     let (k, kw, kh) = ndf::base_kernel(&Brdf::parse("beckmann:alpha=0.1").unwrap(), &d, &cfg).unwrap();
     if let Some(dir) = args.get(2) {
         let dir = std::path::Path::new(dir);
-        brdfmill::npy::write_f64_2d(&dir.join("observed.npy"), d.ny, d.nx, &observed.density).unwrap();
-        brdfmill::npy::write_f64_2d(&dir.join("kernel.npy"), kh, kw, &k).unwrap();
+        brdfmill::base::npy::write_f64_2d(&dir.join("observed.npy"), d.ny, d.nx, &observed.density).unwrap();
+        brdfmill::base::npy::write_f64_2d(&dir.join("kernel.npy"), kh, kw, &k).unwrap();
     }
     let mut lr = LucyRichardson::new(d.nx, d.ny, &k, kw, kh);
     let mut times = vec![];

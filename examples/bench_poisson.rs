@@ -4,7 +4,7 @@
 //!
 //! `cargo run --release --example bench_poisson -- [RUNS] [DUMP_DIR]`
 
-use brdfmill::facets::PoissonSolver;
+use brdfmill::stages::facets::PoissonSolver;
 use rand::{Rng, SeedableRng};
 use std::time::Instant;
 
@@ -17,8 +17,8 @@ fn main() {
         let gy: Vec<f64> = (0..n * n).map(|_| rng.gen_range(-1.0..1.0)).collect();
         if let Some(dir) = args.get(2) {
             let dir = std::path::Path::new(dir);
-            brdfmill::npy::write_f64_2d(&dir.join(format!("gx_{n}.npy")), n, n, &gx).unwrap();
-            brdfmill::npy::write_f64_2d(&dir.join(format!("gy_{n}.npy")), n, n, &gy).unwrap();
+            brdfmill::base::npy::write_f64_2d(&dir.join(format!("gx_{n}.npy")), n, n, &gx).unwrap();
+            brdfmill::base::npy::write_f64_2d(&dir.join(format!("gy_{n}.npy")), n, n, &gy).unwrap();
         }
         let t = Instant::now();
         let mut solver = PoissonSolver::new(n, n);

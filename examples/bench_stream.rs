@@ -18,11 +18,11 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
-use brdfmill::stream::emulator::{Emulator, EmulatorConfig};
-use brdfmill::stream::program::Program;
-use brdfmill::stream::protocol::{parse_response, Response, Status, RX_BUFFER_BYTES};
-use brdfmill::stream::serial::{Link, SerialLink};
-use brdfmill::stream::session::{self, Config, Mode, Outcome, Silent, Stats};
+use brdfmill::apps::stream::emulator::{Emulator, EmulatorConfig};
+use brdfmill::apps::stream::program::Program;
+use brdfmill::apps::stream::protocol::{parse_response, Response, Status, RX_BUFFER_BYTES};
+use brdfmill::apps::stream::serial::{Link, SerialLink};
+use brdfmill::apps::stream::session::{self, Config, Mode, Outcome, Silent, Stats};
 
 const BAUD: u32 = 115_200;
 

@@ -164,7 +164,7 @@ fn main() -> anyhow::Result<()> {
     };
     for (name, shape) in SHAPES {
         let path = Path::new(&dir).join(name);
-        brdfmill::io::write_atomic(&path, &png(&draw(shape, soft)))?;
+        brdfmill::base::io::write_atomic(&path, &png(&draw(shape, soft)))?;
         println!("wrote {}", path.display());
     }
     Ok(())

@@ -3,7 +3,7 @@
 //! `cargo run --release --example make_merl -- OUT.binary [SPEC]` (default spec
 //! `beckmann:alpha=0.18,material=gold`).
 
-use brdfmill::brdf::{Brdf, Merl};
+use brdfmill::stages::brdf::{Brdf, Merl};
 
 fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().collect();

@@ -6,14 +6,17 @@
 //! numbers (Eq. N) follow the restatement the project reads it in; `docs/DESIGN.md` says which equation is
 //! which and holds every derivation the code cites (`DESIGN.md §N`).
 //!
-//! The pipeline, one module per stage, data flowing one way:
+//! The crate in layers; each imports only the layers below it and, among the stages, only earlier ones:
 //!
-//! 1. [`brdf`]: analytic and measured BRDFs behind one type, conductor Fresnel from complex IOR.
-//! 2. [`ndf`]: BRDF → half-angle distribution in slope space → Lucy–Richardson deconvolution of the base
-//!    material's own lobe → target NDF (`ndf.json`).
+//! | layer | modules | holds |
+//! | --- | --- | --- |
+//! | foundation | [`base`], [`gcode`] | directions and slopes, slope-space densities, heightfields, distances, FFTs, file formats and atomic output, figures; the one G-code model (tokenizer, modal state, move list, writer, program model) |
+//! | machining | [`cut`] | tool shapes, machine profiles, drop-cutter, morphology by the tool, the swept stock, the run-time planner |
+//! | stages | [`stages`]: [`brdf`](stages::brdf) → [`ndf`](stages::ndf) → [`facets`](stages::facets) → [`design`](stages::design) → [`svbrdf`](stages::svbrdf) → [`toolpath`](stages::toolpath) → [`simulate`](stages::simulate) → [`optics`](stages::optics) → [`verify`](stages::verify) | target BRDF → NDF → facet tile → the loop around it → G-code → simulated cut → its BRDF and the verdict |
+//! | applications | [`apps`]: [`stream`](apps::stream), [`analyze`](apps::analyze) | GRBL streaming and the virtual controller; a measured surface's NDF and BRDF |
+//! | the job | [`job`] | `JOB.toml`, the runner that sequences the stages and writes their artifacts |
 //!
-//! Shared foundations: [`geometry`] (directions, slopes, half/difference angles), [`slope`] (a slope-space
-//! density grid and its statistics), [`plot`] (false-colour PNG figures) and [`io`] (atomic file output).
+//! The binary (`src/main.rs`, `src/cli/`) only parses arguments, reads and writes files and prints.
 //!
 //! Conventions: right-handed frame, `z` the mean surface normal pointing out of the material; machine lengths
 //! in mm, optical lengths in µm, angles in radians internally. A microfacet normal `wm = (mx, my, mz)` is the
@@ -23,30 +26,9 @@
 #![forbid(unsafe_code)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
-pub mod analyze;
-pub mod brdf;
-pub mod de;
-pub mod design;
-pub mod distance;
-pub mod facets;
-pub(crate) mod fft2;
+pub mod apps;
+pub mod base;
+pub mod cut;
 pub mod gcode;
-pub mod geometry;
-pub mod heightfield;
-pub mod image;
-pub mod io;
 pub mod job;
-pub mod morphology;
-pub mod ndf;
-pub mod npy;
-pub mod optics;
-pub mod plot;
-pub mod simulate;
-pub mod slope;
-pub mod stl;
-pub mod stream;
-pub mod svbrdf;
-pub mod tool;
-pub mod toolpath;
-pub mod verify;
-pub mod x3p;
+pub mod stages;

@@ -39,7 +39,7 @@ fn analyzes_the_real_scan() {
 #[test]
 fn a_npy_surface_needs_its_pitch_and_bad_input_is_named() {
     let dir = tempfile::tempdir().unwrap();
-    let hf = brdfmill::heightfield::Heightfield::flat(64, 64, 0.001, false, 0.0);
+    let hf = brdfmill::base::heightfield::Heightfield::flat(64, 64, 0.001, false, 0.0);
     let npy = dir.path().join("flat.npy");
     hf.write_npy(&npy).unwrap();
     let out = brdfmill()

@@ -56,7 +56,7 @@ fn writes_the_four_artifacts() {
     for key in ["C", "I", "V", "valleys"] {
         assert!(v["stats"]["energy"].get(key).is_some() && v["stats"]["energy_random"].get(key).is_some());
     }
-    let (rows, cols, z) = brdfmill::npy::read_f64_2d(&out_dir.join("tile.npy")).unwrap();
+    let (rows, cols, z) = brdfmill::base::npy::read_f64_2d(&out_dir.join("tile.npy")).unwrap();
     assert_eq!((rows, cols), (6 * 20, 8 * 20));
     assert!(z.iter().all(|v| *v <= 1e-12));
     assert_eq!(&std::fs::read(out_dir.join("tile.png")).unwrap()[1..4], b"PNG");

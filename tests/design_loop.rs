@@ -81,7 +81,7 @@ fn the_chosen_arrangement_is_the_one_the_ball_spoils_least() {
         .max_by(|a, b| a.score.total_cmp(&b.score))
         .unwrap();
     assert_eq!(m.rounds[0].seed, best.seed, "round 1 is the best-scoring candidate");
-    let err = |m: &brdfmill::verify::Metrics| {
+    let err = |m: &brdfmill::stages::verify::Metrics| {
         let r = m.milled.cov_ratio;
         (r[0] - 1.0).abs().max((r[1] - 1.0).abs())
     };

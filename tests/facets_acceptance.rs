@@ -2,9 +2,9 @@
 //! with 32×32 facets: slope statistics against the closed form, a two-sample test against the NDF, CVT
 //! against plain importance sampling, the annealed energy against random arrangements, and seams.
 
-use brdfmill::brdf::Brdf;
-use brdfmill::facets::{self, FacetsConfig};
-use brdfmill::ndf::{self, NdfConfig};
+use brdfmill::stages::brdf::Brdf;
+use brdfmill::stages::facets::{self, FacetsConfig};
+use brdfmill::stages::ndf::{self, NdfConfig};
 
 fn tile() -> facets::Tile {
     let n = ndf::run(&NdfConfig::default(), &Brdf::parse("beckmann:alpha=0.3").unwrap(), None).unwrap();

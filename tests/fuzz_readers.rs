@@ -7,11 +7,11 @@
 //! fuzz_readers -- --nocapture`, which prints the counts per reader. Inputs are reproducible: the random
 //! stream is seeded per reader.
 
-use brdfmill::brdf::Brdf;
+use brdfmill::cut::machine::Machine;
 use brdfmill::gcode::program::Program;
 use brdfmill::job::Job;
-use brdfmill::simulate::gcode::{self, ParseOptions};
-use brdfmill::toolpath::machine::Machine;
+use brdfmill::stages::brdf::Brdf;
+use brdfmill::stages::simulate::gcode::{self, ParseOptions};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 use std::panic::{catch_unwind, AssertUnwindSafe};
@@ -144,7 +144,7 @@ fn mutated_files_are_read_or_refused_never_a_panic() {
         &data("tests/data/x3p/sample-land.x3p"),
         &d.join("m.x3p"),
         n,
-        &|p: &Path| brdfmill::x3p::read(p).map(|_| ()).map_err(|e| e.to_string()),
+        &|p: &Path| brdfmill::base::x3p::read(p).map(|_| ()).map_err(|e| e.to_string()),
     );
     let mut npy = b"\x93NUMPY\x01\x00".to_vec();
     let h = format!(
@@ -155,7 +155,9 @@ fn mutated_files_are_read_or_refused_never_a_panic() {
     npy.extend_from_slice(h.as_bytes());
     npy.extend(std::iter::repeat_n(0u8, 128));
     campaign("npy", &npy, &d.join("m.npy"), n, &|p: &Path| {
-        brdfmill::npy::read_f64_2d(p).map(|_| ()).map_err(|e| e.to_string())
+        brdfmill::base::npy::read_f64_2d(p)
+            .map(|_| ())
+            .map_err(|e| e.to_string())
     });
     let program = b"%\n(header)\nG21 G90 G17\nM3 S10000\nG0 X0 Y0 Z3\nG1 Z-0.5 F100\nG2 X2 Y0 I1 J0\nG3 X0 Y0 R1\nG1 X1.5 Y-0.25\nG0 Z3\nM5\nM30\n%\n";
     campaign("gcode", program, &d.join("m.nc"), n, &|p: &Path| {

@@ -135,7 +135,7 @@ fn ndf_of_a_hard_ring_is_its_slope_annulus() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    let g = brdfmill::ndf::NdfFile::read(&out).unwrap().observed();
+    let g = brdfmill::stages::ndf::NdfFile::read(&out).unwrap().observed();
     let d = g.domain;
     let (inner, outer) = ((5f64).to_radians().tan(), (11f64).to_radians().tan());
     // an edge pixel is 0.0045 wide on the screen, about 0.0022 in slope; a cell is d.dp() wide

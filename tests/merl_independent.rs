@@ -17,8 +17,8 @@
 //! mirror about the half vector), by code in this file, and the test first checks that MERL's published
 //! forward transform gives the angles back.
 
-use brdfmill::brdf::merl::Merl;
-use brdfmill::geometry::Vec3;
+use brdfmill::base::geometry::Vec3;
+use brdfmill::stages::brdf::merl::Merl;
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::io::Read;
 use std::path::PathBuf;

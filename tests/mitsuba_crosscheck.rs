@@ -5,9 +5,9 @@
 //! erf form, so the test checks (a) our D·F with Mitsuba's rational G1 agrees to 1e-4, which pins everything
 //! but G, and (b) the exact form differs from Mitsuba by less than 1% (the fit's documented error).
 
-use brdfmill::brdf::fresnel::fresnel_conductor;
-use brdfmill::brdf::{Brdf, Family, Microfacet};
-use brdfmill::geometry::{half_vector, Vec3};
+use brdfmill::base::geometry::{half_vector, Vec3};
+use brdfmill::stages::brdf::fresnel::fresnel_conductor;
+use brdfmill::stages::brdf::{Brdf, Family, Microfacet};
 
 struct Row {
     dist: String,
@@ -71,7 +71,7 @@ fn agrees_with_mitsuba_roughconductor() {
         let spec = format!("{}:ax={},ay={},eta={},k={}", r.dist, r.au, r.av, r.eta[0], r.k[0]);
         // The spec form takes one IOR for all channels; set the channels directly.
         let mut brdf = Brdf::parse(&spec).unwrap();
-        brdf.material = Some(brdfmill::brdf::ConductorIor { eta: r.eta, k: r.k });
+        brdf.material = Some(brdfmill::stages::brdf::ConductorIor { eta: r.eta, k: r.k });
         let f = brdf.eval(&r.wi, &r.wo);
         for (c, fc) in f.iter().enumerate() {
             let ours = fc * r.wo.z;

@@ -1,9 +1,9 @@
 //! The NDF stage's acceptance figures (issue "Foundation …"), each against an independent truth:
 //! closed-form slope variances, the analytic P22, and a MERL file written from a model and read back.
 
-use brdfmill::brdf::{Brdf, Family, Merl, Microfacet};
-use brdfmill::ndf::{self, NdfConfig, StoppedBy};
-use brdfmill::slope::SlopeGrid;
+use brdfmill::base::slope::SlopeGrid;
+use brdfmill::stages::brdf::{Brdf, Family, Merl, Microfacet};
+use brdfmill::stages::ndf::{self, NdfConfig, StoppedBy};
 
 fn rel(a: f64, b: f64) -> f64 {
     (a - b).abs() / b

@@ -28,10 +28,10 @@
 //! 0.9999 where the nearest vertex lies along the ball's radial direction — the bound is tight, so a CL that
 //! is too low anywhere fails.
 
-use brdfmill::heightfield::Heightfield;
-use brdfmill::npy::read_f64_2d;
-use brdfmill::tool::Shape;
-use brdfmill::toolpath::dropcutter::{DropCutter, Edge};
+use brdfmill::base::heightfield::Heightfield;
+use brdfmill::base::npy::read_f64_2d;
+use brdfmill::cut::dropcutter::{DropCutter, Edge};
+use brdfmill::cut::tool::Shape;
 use std::path::PathBuf;
 
 const PITCH: f64 = 0.02;

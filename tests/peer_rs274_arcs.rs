@@ -29,7 +29,7 @@
 //! Measured: arcs_mixed.ngc — ends and starts 8.9e-16 mm, centres 3.6e-15 mm, sweeps 8.9e-15 rad;
 //! arcspiral.ngc — ends and starts identical, centres 7.4e-12 mm, sweeps 2.0e-14 rad.
 
-use brdfmill::simulate::gcode::{self, ParseOptions, SegmentKind};
+use brdfmill::stages::simulate::gcode::{self, ParseOptions, SegmentKind};
 use md5::{Digest, Md5};
 use std::f64::consts::TAU;
 use std::path::{Path, PathBuf};

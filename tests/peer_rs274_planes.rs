@@ -8,7 +8,7 @@
 //! compares it with the reader's chord vertex nearest to it: a mirrored convention puts that point on the
 //! other side of the chord, a full sagitta away.
 
-use brdfmill::simulate::gcode::{self, ParseOptions};
+use brdfmill::stages::simulate::gcode::{self, ParseOptions};
 
 /// The (first, second) axes of a canonical plane.
 fn axes(plane: &str) -> (usize, usize) {

@@ -26,8 +26,8 @@
 //! (scipy.ndimage's `wrap` / `reflect`) ends 0.74 of the maximum away from scikit-image on `smooth`.
 //! `compact` is zero near its edges, so it checks the kernel's orientation instead (last test).
 
-use brdfmill::ndf::LucyRichardson;
-use brdfmill::npy::read_f64_2d;
+use brdfmill::base::npy::read_f64_2d;
+use brdfmill::stages::ndf::LucyRichardson;
 use std::path::PathBuf;
 
 fn data(name: &str) -> (usize, usize, Vec<f64>) {

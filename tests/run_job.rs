@@ -147,7 +147,7 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         );
     }
     // The tile is the job's 12 × 12 facets of 1 mm at 5 µm: 2400² samples (examples/default.toml).
-    let (rows, cols, _) = brdfmill::npy::read_f64_2d(&p("tile.npy")).unwrap();
+    let (rows, cols, _) = brdfmill::base::npy::read_f64_2d(&p("tile.npy")).unwrap();
     assert_eq!((rows, cols), (2400, 2400), "tile.npy");
     // A binary STL is an 80-byte header, a triangle count and 50 bytes per triangle.
     let stl = std::fs::read(p("tile.stl")).unwrap();
@@ -176,7 +176,7 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         "stepover {stepover} mm"
     );
     // The simulated heightfield is the grid sim.json describes, and its deepest cell is the one it reports.
-    let (rows, cols, z) = brdfmill::npy::read_f64_2d(&p("sim.npy")).unwrap();
+    let (rows, cols, z) = brdfmill::base::npy::read_f64_2d(&p("sim.npy")).unwrap();
     assert_eq!(
         [cols as u64, rows as u64],
         [
@@ -490,8 +490,8 @@ fn every_example_job_loads() {
             // the MERL example needs its generated file: make it beside a copy of the job
             let tmp = tempfile::tempdir().unwrap();
             std::fs::create_dir_all(tmp.path().join("data")).unwrap();
-            let brdf = brdfmill::brdf::Brdf::parse("beckmann:alpha=0.18,material=gold").unwrap();
-            brdfmill::brdf::Merl::from_fn(|a, b| brdf.eval(a, b))
+            let brdf = brdfmill::stages::brdf::Brdf::parse("beckmann:alpha=0.18,material=gold").unwrap();
+            brdfmill::stages::brdf::Merl::from_fn(|a, b| brdf.eval(a, b))
                 .write(&tmp.path().join("data/beckmann-0.18-gold.binary"))
                 .unwrap();
             let fixed = text.replace("../machines/", &format!("{}/", root().join("machines").display()));

@@ -2,11 +2,12 @@
 //! straight, diagonal, sloped and arc moves of a ball, a flat floor for a flat bit, and the toolpath stage's
 //! finishing program reproducing the design within scallop plus tolerance wherever the bit can reach.
 
-use brdfmill::brdf::Brdf;
-use brdfmill::facets::{self, FacetsConfig};
-use brdfmill::ndf::{self, NdfConfig};
-use brdfmill::simulate::{self, Shape, SimulateConfig, Simulation};
-use brdfmill::toolpath::{self, machine::Machine, ToolpathConfig};
+use brdfmill::cut::machine::Machine;
+use brdfmill::stages::brdf::Brdf;
+use brdfmill::stages::facets::{self, FacetsConfig};
+use brdfmill::stages::ndf::{self, NdfConfig};
+use brdfmill::stages::simulate::{self, Shape, SimulateConfig, Simulation};
+use brdfmill::stages::toolpath::{self, ToolpathConfig};
 use std::path::Path;
 
 const R: f64 = 0.5;

@@ -41,7 +41,7 @@ fn simulate_writes_its_files_and_figures() {
         serde_json::from_str(&std::fs::read_to_string(out.join("sim.json")).unwrap()).unwrap();
     assert_eq!(json["stats"]["arcs"], 1);
     assert!(json["stats"]["removed_volume_mm3"].as_f64().unwrap() > 0.1);
-    let (rows, cols, z) = brdfmill::npy::read_f64_2d(&out.join("sim.npy")).unwrap();
+    let (rows, cols, z) = brdfmill::base::npy::read_f64_2d(&out.join("sim.npy")).unwrap();
     assert_eq!(
         [cols, rows],
         [

@@ -6,7 +6,7 @@
 //! as ignored; `cargo test -- --ignored`, as `.ci/run` runs it, fails when the folder is missing). The same
 //! check runs without the package on programs written here in LinuxCNC's language.
 
-use brdfmill::simulate::{self, gcode, Shape, SimulateConfig};
+use brdfmill::stages::simulate::{self, gcode, Shape, SimulateConfig};
 use std::path::{Path, PathBuf};
 
 const NCFILES: &str = "/usr/share/linuxcnc/ncfiles";
@@ -193,7 +193,7 @@ fn linuxcnc_samples_simulate_or_are_refused_with_line_and_column() {
 /// move is the mounted tool.
 #[test]
 fn tool_changes_tag_segments() {
-    use brdfmill::simulate::gcode::{parse, ParseOptions};
+    use brdfmill::stages::simulate::gcode::{parse, ParseOptions};
     let p = |t: &str| parse(t, &ParseOptions::default()).unwrap();
     let g = p("T1 M6\nG43 H1\nG0 X1\nT3 M6 (MSG,change)\nM0\nG43 H3\nG0 X2\n");
     assert_eq!(g.segments.iter().map(|s| s.tool).collect::<Vec<_>>(), [1, 3]);

@@ -7,11 +7,13 @@ use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use brdfmill::stream::emulator::{Emulator, EmulatorConfig, Fault, FaultAt, FaultKind, Piece};
-use brdfmill::stream::journal::{Journal, JournalState};
-use brdfmill::stream::program::{MotionMode, Program};
-use brdfmill::stream::serial::{Link, SerialLink};
-use brdfmill::stream::session::{self, Config, EndDetection, Mode, Observer, Outcome, Progress, Silent, StopReason};
+use brdfmill::apps::stream::emulator::{Emulator, EmulatorConfig, Fault, FaultAt, FaultKind, Piece};
+use brdfmill::apps::stream::journal::{Journal, JournalState};
+use brdfmill::apps::stream::program::{MotionMode, Program};
+use brdfmill::apps::stream::serial::{Link, SerialLink};
+use brdfmill::apps::stream::session::{
+    self, Config, EndDetection, Mode, Observer, Outcome, Progress, Silent, StopReason,
+};
 
 fn program(dir: &Path, name: &str, text: &str) -> Program {
     let p = dir.join(name);
@@ -174,8 +176,8 @@ type Param = Box<dyn Fn([f64; 3]) -> f64>;
 /// How far along moving line `l` (from `a` to `b`, work mm) a point is, 0 at its start and 1 at its end,
 /// and the line's length: by projection on a straight line, by angle about the centre on an arc (`I J`
 /// or `R` read from the block here, independently of the streamer's arc model).
-fn path_param(l: &brdfmill::stream::program::Line, a: [f64; 3], b: [f64; 3]) -> (Param, f64) {
-    use brdfmill::stream::program::words;
+fn path_param(l: &brdfmill::apps::stream::program::Line, a: [f64; 3], b: [f64; 3]) -> (Param, f64) {
+    use brdfmill::apps::stream::program::words;
     let d: Vec<f64> = (0..3).map(|i| b[i] - a[i]).collect();
     let len = d.iter().map(|v| v * v).sum::<f64>().sqrt();
     let cw = match l.motion {
@@ -509,7 +511,7 @@ struct HangGuard<'a> {
 
 impl Observer for HangGuard<'_> {
     fn progress(&mut self, p: &Progress) {
-        if p.lines_acked >= p.lines_total && p.state == Some(brdfmill::stream::protocol::MachineState::Idle) {
+        if p.lines_acked >= p.lines_total && p.state == Some(brdfmill::apps::stream::protocol::MachineState::Idle) {
             self.idle_after_last_ok += 1;
             if self.idle_after_last_ok > IDLE_REPORTS_AFTER_THE_LAST_OK {
                 self.stop.store(true, Ordering::SeqCst);
@@ -778,7 +780,10 @@ impl Observer for HoldThenResume<'_> {
         if p.lines_acked >= self.at && !self.hold.load(Ordering::SeqCst) && self.held_at.is_empty() {
             self.hold.store(true, Ordering::SeqCst);
         }
-        if matches!(p.state, Some(brdfmill::stream::protocol::MachineState::Hold { sub: 0 })) {
+        if matches!(
+            p.state,
+            Some(brdfmill::apps::stream::protocol::MachineState::Hold { sub: 0 })
+        ) {
             if let Some(pos) = p.position_mm {
                 self.held_at.push(pos);
                 self.done_when_held.get_or_insert(p.lines_done);
@@ -871,7 +876,7 @@ impl Observer for ResumeAtPause<'_> {
         self.notes.push(what.to_string());
     }
     fn progress(&mut self, p: &Progress) {
-        if p.state == Some(brdfmill::stream::protocol::MachineState::Hold { sub: 0 }) {
+        if p.state == Some(brdfmill::apps::stream::protocol::MachineState::Hold { sub: 0 }) {
             self.held += 1;
         }
     }

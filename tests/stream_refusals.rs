@@ -3,7 +3,7 @@
 use std::process::Command;
 use std::time::Duration;
 
-use brdfmill::stream::session::Config;
+use brdfmill::apps::stream::session::Config;
 
 fn brdfmill() -> Command {
     Command::new(env!("CARGO_BIN_EXE_brdfmill"))

@@ -2,15 +2,16 @@
 //! GRBL 1.1 controller over a real pseudo-terminal, every block is accepted (an `ok` for each, no `error:`,
 //! read off the wire), the receive buffer never overflows, and the controller ends where the program ends.
 
-use brdfmill::brdf::Brdf;
-use brdfmill::facets::{self, FacetsConfig};
+use brdfmill::apps::stream::emulator::{Emulator, EmulatorConfig};
+use brdfmill::apps::stream::program::Program;
+use brdfmill::apps::stream::serial::{Link, SerialLink};
+use brdfmill::apps::stream::session::{self, Config, Mode, Outcome, Silent};
+use brdfmill::cut::machine::{Machine, Stock};
 use brdfmill::gcode::moves::Move;
-use brdfmill::ndf::{self, NdfConfig};
-use brdfmill::stream::emulator::{Emulator, EmulatorConfig};
-use brdfmill::stream::program::Program;
-use brdfmill::stream::serial::{Link, SerialLink};
-use brdfmill::stream::session::{self, Config, Mode, Outcome, Silent};
-use brdfmill::toolpath::{self, machine::Machine, machine::Stock, ToolpathConfig};
+use brdfmill::stages::brdf::Brdf;
+use brdfmill::stages::facets::{self, FacetsConfig};
+use brdfmill::stages::ndf::{self, NdfConfig};
+use brdfmill::stages::toolpath::{self, ToolpathConfig};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;

@@ -9,10 +9,10 @@ use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::time::Duration;
 
-use brdfmill::stream::emulator::{Emulator, EmulatorConfig, Fault, FaultAt, FaultKind};
-use brdfmill::stream::program::{LineKind, Program};
-use brdfmill::stream::serial::{Link, SerialLink};
-use brdfmill::stream::session::{self, Config, Mode, Outcome, Silent};
+use brdfmill::apps::stream::emulator::{Emulator, EmulatorConfig, Fault, FaultAt, FaultKind};
+use brdfmill::apps::stream::program::{LineKind, Program};
+use brdfmill::apps::stream::serial::{Link, SerialLink};
+use brdfmill::apps::stream::session::{self, Config, Mode, Outcome, Silent};
 
 fn program(dir: &Path, name: &str, text: &str) -> Program {
     let p = dir.join(name);

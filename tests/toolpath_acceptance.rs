@@ -2,12 +2,13 @@
 //! own interpreter, covers the requested area, never dips below the design, and limit violations are
 //! refused before anything is written.
 
-use brdfmill::brdf::Brdf;
-use brdfmill::facets::{self, FacetsConfig};
+use brdfmill::base::heightfield::Heightfield;
+use brdfmill::cut::machine::Machine;
 use brdfmill::gcode::moves::Move;
-use brdfmill::heightfield::Heightfield;
-use brdfmill::ndf::{self, NdfConfig};
-use brdfmill::toolpath::{self, check, machine::Machine, ToolpathConfig, ToolpathError};
+use brdfmill::stages::brdf::Brdf;
+use brdfmill::stages::facets::{self, FacetsConfig};
+use brdfmill::stages::ndf::{self, NdfConfig};
+use brdfmill::stages::toolpath::{self, check, ToolpathConfig, ToolpathError};
 use std::path::Path;
 use std::sync::OnceLock;
 
@@ -274,8 +275,8 @@ fn program(profile: &str, rough: &str, tile: &Heightfield) -> toolpath::Toolpath
 }
 
 /// Simulate `gcode` with the machine's tool table on a fixed grid.
-fn simulate(gcode: &str, m: &Machine) -> brdfmill::simulate::Simulation {
-    use brdfmill::simulate::{self, Shape, SimulateConfig};
+fn simulate(gcode: &str, m: &Machine) -> brdfmill::stages::simulate::Simulation {
+    use brdfmill::stages::simulate::{self, Shape, SimulateConfig};
     let cfg = SimulateConfig {
         tool: Shape::Ball { diameter_mm: 1.0 },
         tools: simulate::tool_table(m),
@@ -312,7 +313,7 @@ fn prefix(gcode: &str, k: usize) -> String {
 /// roughing length — all measured on the simulated stock.
 #[test]
 fn every_profile_and_tile_cuts_within_the_design_and_each_tools_depth_of_cut() {
-    use brdfmill::simulate::{self, gcode::ParseOptions};
+    use brdfmill::stages::simulate::{self, gcode::ParseOptions};
     for (depth, name) in [(0.08, "shallow"), (1.2, "deep"), (0.5, "edge")] {
         let tile = if name == "edge" {
             edge_relief(depth)
@@ -324,11 +325,11 @@ fn every_profile_and_tile_cuts_within_the_design_and_each_tools_depth_of_cut() {
             let p = program(profile, rough, &tile);
             let s = &p.summary;
             let sim = simulate(&p.gcode, &m);
-            let ball = brdfmill::tool::Shape::Ball { diameter_mm: 1.0 };
+            let ball = brdfmill::cut::tool::Shape::Ball { diameter_mm: 1.0 };
             // the gouge check covers each tool
             let mut cuts = sim.tool_cuts.clone();
             if cuts.is_empty() {
-                cuts.push(brdfmill::simulate::ToolCut {
+                cuts.push(brdfmill::stages::simulate::ToolCut {
                     number: 1,
                     shape: ball,
                     z_mm: sim.heightfield.z_mm.clone(),

@@ -3,9 +3,9 @@
 //! derived in a comment from the model (the window's angular resolution, Parseval, edge diffraction), not
 //! taken from a measured value.
 
-use brdfmill::geometry::{spherical, Vec3};
-use brdfmill::heightfield::Heightfield;
-use brdfmill::optics::wave::{self, OpticalSurface, WaveConfig};
+use brdfmill::base::geometry::{spherical, Vec3};
+use brdfmill::base::heightfield::Heightfield;
+use brdfmill::stages::optics::wave::{self, OpticalSurface, WaveConfig};
 use std::f64::consts::PI;
 
 /// A periodic raster-finish patch: ball-nose scallops of radius `r_um` and period `d_um` along x, with a
@@ -82,11 +82,13 @@ fn a_surface_smooth_at_the_wavelength_scale_approaches_geometric_optics() {
     let slice = wave::fft_slice(&surf, &Vec3::new(0.0, 0.0, 1.0), &cfg).unwrap();
     let (p, wx, wy) = wave::slope_marginals(&slice);
     // Against the geometric module's histogram of central-difference slopes (the figures README quotes).
-    let slopes = brdfmill::optics::geometric::slopes(&hf, 0.0, 1);
+    let slopes = brdfmill::base::surface::slopes(&hf, 0.0, 1);
     let (gx, gy) = wave::geometric_marginals(&slopes, &p, &slice, cfg.sigma_um);
-    let l1_geo = brdfmill::distance::relative_l1(&wx, &gx);
-    let ratio = brdfmill::distance::weighted_variance(&p, &wx) / brdfmill::distance::weighted_variance(&p, &gx);
-    let ratio_y = brdfmill::distance::weighted_variance(&p, &wy) / brdfmill::distance::weighted_variance(&p, &gy);
+    let l1_geo = brdfmill::base::distance::relative_l1(&wx, &gx);
+    let ratio =
+        brdfmill::base::distance::weighted_variance(&p, &wx) / brdfmill::base::distance::weighted_variance(&p, &gx);
+    let ratio_y =
+        brdfmill::base::distance::weighted_variance(&p, &wy) / brdfmill::base::distance::weighted_variance(&p, &gy);
     println!("wave vs geometric slope marginal across the scallops: relative L1 {l1_geo:.4}, variance ratio {ratio:.4} (along them {ratio_y:.4})");
 
     // An independent prediction of the wave marginal from the surface alone. At normal incidence ξ3 = 2 and
@@ -137,7 +139,7 @@ fn a_surface_smooth_at_the_wavelength_scale_approaches_geometric_optics() {
     let total: f64 = pred.iter().sum();
     pred.iter_mut().for_each(|v| *v /= total);
     let v_pred = sp2 / sw - (sp / sw).powi(2);
-    let v_wave = brdfmill::distance::weighted_variance(&p, &wx);
+    let v_wave = brdfmill::base::distance::weighted_variance(&p, &wx);
     // Variance: what the identity leaves out is the odd ξ2 term (relative ≈ |ψ̄|·λ/(2π·ξ3·σ·ψz) ≈ 0.2%, and
     // odd, so it cancels in the second moment to first order), ξ2 taken at each sample's slope rather than
     // across its spread b (≈ 4b² = 1.5e-4), the 4σ cut (e^-8 = 3e-4) and the ψ̄ grid (1.6 samples per b:
@@ -192,7 +194,7 @@ fn a_surface_smooth_at_the_wavelength_scale_approaches_geometric_optics() {
     // (T) and between them, over 4π²P.
     let b_u = 1.0 / (2.0 * 2f64.sqrt() * PI * sigma);
     let moved = (2.0 * two_edge_tail(b_u, gap) + two_edge_inner(b_u, gap)) / (4.0 * PI * PI * period);
-    let l1 = brdfmill::distance::relative_l1(&wx, &pred);
+    let l1 = brdfmill::base::distance::relative_l1(&wx, &pred);
     println!("wave vs prediction relative L1 {l1:.4} (bound {:.4})", 2.0 * moved);
     assert!(l1 < 2.0 * moved, "relative L1 {l1} against {}", 2.0 * moved);
 }

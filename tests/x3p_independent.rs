@@ -17,7 +17,7 @@
 //! warning when a float file's increment is not 1), and its writer stores metres; the last test, a
 //! hand-written float64 file of metres with `CZ/Increment = 1.0E-6`, checks that rule.
 
-use brdfmill::x3p::{self, X3p};
+use brdfmill::base::x3p::{self, X3p};
 use std::f64::consts::PI;
 use std::path::PathBuf;
 

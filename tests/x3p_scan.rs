@@ -1,11 +1,11 @@
 //! The real confocal scan in `tests/data/x3p/` (copied from `shared/data/x3p/`): it loads with its invalid
 //! points, and a surface written by brdfmill reads back within two rounding steps.
 
-use brdfmill::heightfield::Heightfield;
+use brdfmill::base::heightfield::Heightfield;
 use std::path::Path;
 
-fn scan() -> brdfmill::x3p::X3p {
-    brdfmill::x3p::read(Path::new("tests/data/x3p/sample-land.x3p")).expect("the scan reads")
+fn scan() -> brdfmill::base::x3p::X3p {
+    brdfmill::base::x3p::read(Path::new("tests/data/x3p/sample-land.x3p")).expect("the scan reads")
 }
 
 #[test]
@@ -38,7 +38,7 @@ fn an_x3p_written_by_brdfmill_reads_back_within_rounding() {
     let hf = scan().heightfield().unwrap();
     let npy = dir.path().join("h.npy");
     hf.write_npy(&npy).unwrap();
-    let (ny, nx, z) = brdfmill::npy::read_f64_2d(&npy).unwrap();
+    let (ny, nx, z) = brdfmill::base::npy::read_f64_2d(&npy).unwrap();
     let from_npy = Heightfield {
         nx,
         ny,
@@ -47,8 +47,8 @@ fn an_x3p_written_by_brdfmill_reads_back_within_rounding() {
         z_mm: z,
     };
     let x3p = dir.path().join("h.x3p");
-    brdfmill::x3p::write(&x3p, &from_npy).unwrap();
-    let back = brdfmill::x3p::read(&x3p).unwrap();
+    brdfmill::base::x3p::write(&x3p, &from_npy).unwrap();
+    let back = brdfmill::base::x3p::read(&x3p).unwrap();
     assert_eq!((back.nx, back.ny), (nx, ny));
     assert_eq!(back.invalid_count(), 0);
     assert_eq!(back.data_checksum_ok, Some(true));

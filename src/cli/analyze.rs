@@ -2,7 +2,7 @@
 //! with a report.
 
 use anyhow::Result;
-use brdfmill::analyze::{self, Config};
+use brdfmill::apps::analyze::{self, Config};
 use std::path::PathBuf;
 
 /// Arguments of `brdfmill analyze`.

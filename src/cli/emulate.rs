@@ -6,7 +6,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
-use brdfmill::stream::emulator::{Emulator, EmulatorConfig, Fault};
+use brdfmill::apps::stream::emulator::{Emulator, EmulatorConfig, Fault};
 
 /// Arguments of `brdfmill emulate`.
 #[derive(clap::Args, Debug)]

@@ -1,8 +1,8 @@
 //! `brdfmill facets`: ndf.json → DIR/tile.json, tile.npy, tile.png, tile.stl.
 
 use anyhow::{bail, Result};
-use brdfmill::facets::{self, format::Source, FacetsConfig, SteepPolicy, TileFile};
-use brdfmill::ndf::NdfFile;
+use brdfmill::stages::facets::{self, format::Source, FacetsConfig, SteepPolicy, TileFile};
+use brdfmill::stages::ndf::NdfFile;
 use std::path::PathBuf;
 
 /// Arguments of `brdfmill facets`.
@@ -74,10 +74,10 @@ pub fn run(a: &Args) -> Result<()> {
     let stl = tile.stl();
     let png = tile.relief_png().to_png();
     let json = file.to_json();
-    brdfmill::io::write_atomic(&a.out.join("tile.stl"), &stl)?;
-    brdfmill::io::write_atomic(&a.out.join("tile.png"), &png)?;
+    brdfmill::base::io::write_atomic(&a.out.join("tile.stl"), &stl)?;
+    brdfmill::base::io::write_atomic(&a.out.join("tile.png"), &png)?;
     tile.heightfield.write_npy(&a.out.join("tile.npy"))?;
-    brdfmill::io::write_atomic(&a.out.join("tile.json"), json.as_bytes())?;
+    brdfmill::base::io::write_atomic(&a.out.join("tile.json"), json.as_bytes())?;
 
     let s = &file.stats;
     let sm = &s.sampling;

@@ -1,8 +1,8 @@
 //! `brdfmill ndf`: BRDF → ndf.json (+ PNG).
 
 use anyhow::{Context, Result};
-use brdfmill::brdf::Brdf;
-use brdfmill::ndf::{self, HalfAngleConfig, NdfConfig, NdfFile};
+use brdfmill::stages::brdf::Brdf;
+use brdfmill::stages::ndf::{self, HalfAngleConfig, NdfConfig, NdfFile};
 use std::path::PathBuf;
 
 /// Arguments of `brdfmill ndf`.
@@ -69,7 +69,7 @@ pub fn run(a: &Args) -> Result<()> {
     let brdf = match (&a.brdf, &a.highlight) {
         (Some(spec), _) => Brdf::parse(spec).context("--brdf")?,
         (None, Some(path)) => {
-            let spec = brdfmill::brdf::highlight::spec(
+            let spec = brdfmill::stages::brdf::highlight::spec(
                 &path.display().to_string(),
                 Some(a.highlight_extent_deg),
                 a.material.as_deref(),
@@ -90,7 +90,7 @@ pub fn run(a: &Args) -> Result<()> {
     let png = a.png.as_ref().map(|_| ndf::render_pair_png(&n).to_png());
     file.write(&a.out)?;
     if let (Some(path), Some(bytes)) = (&a.png, png) {
-        brdfmill::io::write_atomic(path, &bytes)?;
+        brdfmill::base::io::write_atomic(path, &bytes)?;
     }
     let s = &n.stats;
     let o = &n.observed_stats;

@@ -106,7 +106,7 @@ pub fn run(a: &Args) -> Result<i32> {
 }
 
 /// The closing summary; returns the exit code.
-fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outcome, total_s: f64) -> i32 {
+fn summary(a: &Args, t: &brdfmill::stages::toolpath::ToolpathConfig, outcome: &job::Outcome, total_s: f64) -> i32 {
     println!();
     for (stage, s) in &outcome.timings {
         println!("{:>9}  {:6.2} s", stage.name(), s);
@@ -139,7 +139,7 @@ fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outc
             "program   {} — {} lines, estimated {} of machining, cuts to {:.3} mm; tools: {}",
             a.out.join("program.nc").display(),
             p.lines,
-            brdfmill::toolpath::hms(p.estimated_s),
+            brdfmill::stages::toolpath::hms(p.estimated_s),
             p.depth_mm,
             t.tools_in_order()
         );
@@ -166,7 +166,7 @@ fn summary(a: &Args, t: &brdfmill::toolpath::ToolpathConfig, outcome: &job::Outc
 }
 
 /// Print each region's figures and the verdict of a job with `[svbrdf]`; the exit code.
-fn region_verdict(m: &brdfmill::verify::RegionsMetrics, allow_shortfall: bool) -> i32 {
+fn region_verdict(m: &brdfmill::stages::verify::RegionsMetrics, allow_shortfall: bool) -> i32 {
     for r in &m.regions {
         println!(
             "region    `{}`: milled NDF corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}], border {:.2} mm, {}",
@@ -200,7 +200,7 @@ fn verdict_line(pass: bool, what_passes: &str, notes: &[String], allow_shortfall
 }
 
 /// Print the figures and the verdict; the exit code.
-fn verdict(m: &brdfmill::verify::Metrics, allow_shortfall: bool) -> i32 {
+fn verdict(m: &brdfmill::stages::verify::Metrics, allow_shortfall: bool) -> i32 {
     println!(
         "tile      NDF corr {:.4}, L1 {:.4}, JS {:.4}, variance ratio [{:.3}, {:.3}] (facets ⊛ base lobe)",
         m.design.ndf_corr, m.design.ndf_l1, m.design.ndf_js, m.design.cov_ratio[0], m.design.cov_ratio[1]

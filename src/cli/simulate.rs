@@ -2,9 +2,9 @@
 //! sim.stl) and, given the design, its deviation map.
 
 use anyhow::{anyhow, bail, Context, Result};
-use brdfmill::facets::TileFile;
-use brdfmill::simulate::{self, Shape, SimulateConfig};
-use brdfmill::toolpath::machine::Machine;
+use brdfmill::cut::machine::Machine;
+use brdfmill::stages::facets::TileFile;
+use brdfmill::stages::simulate::{self, Shape, SimulateConfig};
 use std::path::PathBuf;
 
 /// Arguments of `brdfmill simulate`.
@@ -126,7 +126,7 @@ pub fn run(a: &Args) -> Result<()> {
     });
     let stl = a.stl.then(|| {
         let tris = simulate::solid(&sim, a.stl_side, 1.0);
-        brdfmill::stl::to_binary_stl(&tris, "brdfmill simulated cut")
+        brdfmill::base::stl::to_binary_stl(&tris, "brdfmill simulated cut")
     });
     let json = simulate::SimFile::new(
         &sim,
@@ -137,14 +137,14 @@ pub fn run(a: &Args) -> Result<()> {
     )
     .to_json();
     sim.heightfield.write_npy(&a.out.join("sim.npy"))?;
-    brdfmill::io::write_atomic(&a.out.join("sim.png"), &relief)?;
+    brdfmill::base::io::write_atomic(&a.out.join("sim.png"), &relief)?;
     if let Some(b) = &dev_png {
-        brdfmill::io::write_atomic(&a.out.join("deviation.png"), b)?;
+        brdfmill::base::io::write_atomic(&a.out.join("deviation.png"), b)?;
     }
     if let Some(b) = &stl {
-        brdfmill::io::write_atomic(&a.out.join("sim.stl"), b)?;
+        brdfmill::base::io::write_atomic(&a.out.join("sim.stl"), b)?;
     }
-    brdfmill::io::write_atomic(&a.out.join("sim.json"), json.as_bytes())?;
+    brdfmill::base::io::write_atomic(&a.out.join("sim.json"), json.as_bytes())?;
 
     println!(
         "program   {} lines, {} moves ({} arcs → {} segments, {} reach the stock){}",
@@ -172,7 +172,7 @@ pub fn run(a: &Args) -> Result<()> {
     );
     println!(
         "time      {} estimated ({}), {:.1} mm cutting, {:.1} mm rapid",
-        brdfmill::toolpath::hms(s.estimated_s),
+        brdfmill::stages::toolpath::hms(s.estimated_s),
         s.machine,
         s.feed_length_mm,
         s.rapid_length_mm

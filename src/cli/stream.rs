@@ -7,9 +7,9 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use anyhow::{bail, Context, Result};
-use brdfmill::stream::program::Program;
-use brdfmill::stream::serial::{SerialLink, DEFAULT_BAUD};
-use brdfmill::stream::session::{self, Config, Mode, Observer, Outcome, Progress};
+use brdfmill::apps::stream::program::Program;
+use brdfmill::apps::stream::serial::{SerialLink, DEFAULT_BAUD};
+use brdfmill::apps::stream::session::{self, Config, Mode, Observer, Outcome, Progress};
 
 /// Arguments of `brdfmill stream`.
 #[derive(clap::Args, Debug)]
@@ -146,7 +146,7 @@ pub fn run(a: &Args) -> Result<()> {
     // Keys on a terminal raise the same flags; the listener restores the terminal when it is dropped, after
     // the session on every way out.
     let mut keys =
-        brdfmill::stream::keys::Keys::listen(std::io::stdin().as_fd(), Arc::clone(&hold), Arc::clone(&resume))
+        brdfmill::apps::stream::keys::Keys::listen(std::io::stdin().as_fd(), Arc::clone(&hold), Arc::clone(&resume))
             .context("cannot read keys from the terminal")?;
     let by_key = if keys.is_some() { "`!` or space, or " } else { "" };
     let resume_key = if keys.is_some() { "`~` or Enter, or " } else { "" };

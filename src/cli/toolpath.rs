@@ -1,8 +1,9 @@
 //! `brdfmill toolpath`: tile.json + machine profile → program.nc.
 
 use anyhow::{bail, Result};
-use brdfmill::facets::TileFile;
-use brdfmill::toolpath::{self, machine::Machine, machine::Stock, Strategy, ToolpathConfig};
+use brdfmill::cut::machine::{Machine, Stock};
+use brdfmill::stages::facets::TileFile;
+use brdfmill::stages::toolpath::{self, Strategy, ToolpathConfig};
 use std::path::PathBuf;
 
 /// Arguments of `brdfmill toolpath`.
@@ -91,7 +92,7 @@ pub fn run(a: &Args) -> Result<()> {
     let hf = tile.load_heightfield(&a.tile)?;
     let t0 = std::time::Instant::now();
     let p = toolpath::run(&cfg, &hf, &machine)?;
-    brdfmill::io::write_atomic(&a.out, p.gcode.as_bytes())?;
+    brdfmill::base::io::write_atomic(&a.out, p.gcode.as_bytes())?;
     let s = &p.summary;
     println!("machine   {} ({:?}), tool {}", machine.name, machine.dialect, cfg.tool);
     println!(

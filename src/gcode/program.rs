@@ -74,8 +74,11 @@ pub enum ProgramError {
     },
 }
 
+use crate::gcode::block::{BlockError, NonModal};
+use crate::gcode::interp::{Interpreter, Motion};
 use crate::gcode::lex::{self, Block};
 pub use crate::gcode::modal::{Distance, Modal, MotionMode, Spindle, Units};
+use crate::gcode::Dialect;
 
 /// What kind of line this is, for the streaming protocol.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -117,8 +120,12 @@ pub struct Line {
     pub moves: bool,
     /// The motion mode of the move, when it moves.
     pub motion: Option<MotionMode>,
-    /// The line makes later positions unknowable to this model (G28, G30, G92, G53, G10, G38.x…).
+    /// The line makes later positions unknowable to this model (G28, G30, G53, G38.x, an absolute change of
+    /// the work offsets, homing, a jog…) until an absolute move sets them again.
     pub breaks_position: bool,
+    /// GRBL 1.1h would refuse this block: its `error:N` code and why (the model leaves its state as it was,
+    /// as the controller does).
+    pub refusal: Option<BlockError>,
 }
 
 impl Line {
@@ -269,8 +276,7 @@ impl Program {
                 max: MAX_LINE_NUMBER,
             });
         }
-        let mut modal = Modal::default();
-        let mut pos: Position = [None; 3];
+        let mut interp = Interpreter::unknown_frame(Dialect::Grbl, [None; 3]);
         let mut lines = Vec::with_capacity(src.len());
         // where the program ended, as the simulator reads it: `M2`/`M30`, or a `%` after content (a first
         // `%` before any is the start mark)
@@ -331,24 +337,24 @@ impl Program {
                     .any(|w| w.letter == 'G' && (same(w.value, 10.0) || same(w.value, 28.1) || same(w.value, 30.1)));
                 (if setting { LineKind::Setting } else { LineKind::Gcode }, block)
             };
+            let pos = interp.work_position();
             let mut line = Line {
                 number,
                 source: (*s).to_string(),
                 block,
                 kind,
-                before: modal,
-                after: modal,
+                before: interp.modal,
+                after: interp.modal,
                 start_mm: pos,
                 end_mm: pos,
                 moves: false,
                 motion: None,
                 breaks_position: false,
+                refusal: None,
             };
-            if kind == LineKind::Gcode && !line.block.starts_with('$') {
+            if kind != LineKind::Empty && !line.block.starts_with('$') {
                 let ws = words(&line.block).map_err(|e| syntax(e.to_string()))?;
-                apply(&ws, &mut modal, &mut pos, &mut line);
-                line.end_mm = pos;
-                line.after = modal;
+                model(&mut interp, &ws, &mut line);
                 match line.program_flow() {
                     Some(2) => end = Some((number, "`M2`")),
                     Some(30) => end = Some((number, "`M30`")),
@@ -356,8 +362,8 @@ impl Program {
                 }
             } else if kind == LineKind::System && (line.block == "$H" || line.block.starts_with("$J")) {
                 line.breaks_position = true;
-                pos = [None; 3];
-                line.end_mm = pos;
+                interp.known = [false; 3];
+                line.end_mm = interp.work_position();
             }
             if kind != LineKind::Empty {
                 let chars = line.wire_text(numbered).len();
@@ -423,129 +429,46 @@ fn strip_n(cleaned: &str, ws: &[Word]) -> String {
     out
 }
 
-/// Apply a block's words to the modal state and position (the model, not a validator: GRBL checks).
-fn apply(ws: &[Word], modal: &mut Modal, pos: &mut Position, line: &mut Line) {
-    let scale = |m: &Modal| m.units.mm();
-    let mut axis: [Option<f64>; 3] = [None; 3];
-    let mut motion_word = None;
-    let mut non_modal_motion = false;
-    for w in ws {
-        match w.letter {
-            'G' => {
-                let g = w.value;
-                if same(g, 0.0) {
-                    motion_word = Some(MotionMode::Rapid);
-                } else if same(g, 1.0) {
-                    motion_word = Some(MotionMode::Linear);
-                } else if same(g, 2.0) {
-                    motion_word = Some(MotionMode::ArcCw);
-                } else if same(g, 3.0) {
-                    motion_word = Some(MotionMode::ArcCcw);
-                } else if same(g, 80.0) {
-                    motion_word = Some(MotionMode::Cancel);
-                } else if same(g, 17.0) || same(g, 18.0) || same(g, 19.0) {
-                    modal.plane = g.round() as u8;
-                } else if same(g, 20.0) {
-                    modal.units = Units::Inch;
-                } else if same(g, 21.0) {
-                    modal.units = Units::Mm;
-                } else if same(g, 90.0) {
-                    modal.distance = Distance::Absolute;
-                } else if same(g, 91.0) {
-                    modal.distance = Distance::Incremental;
-                } else if same(g, 90.1) {
-                    modal.arc_distance = Distance::Absolute;
-                } else if same(g, 91.1) {
-                    modal.arc_distance = Distance::Incremental;
-                } else if let Some(m) = [38.2, 38.3, 38.4, 38.5]
-                    .iter()
-                    .position(|&p| same(g, p))
-                    .and_then(|k| MotionMode::from_tenths(382 + k as i64))
-                {
-                    // G38.2–G38.5 are a motion mode (group 1), as in GRBL: later axis-only lines probe too
-                    motion_word = Some(m);
-                } else if same(g, 28.0) || same(g, 30.0) || same(g, 53.0) || same(g, 92.0) || (38.0..39.0).contains(&g)
-                {
-                    non_modal_motion = true;
-                } else if same(g, 92.1) || same(g, 43.1) || same(g, 49.0) {
-                    line.breaks_position = true;
-                }
-            }
-            'M' => {
-                let m = w.value.round() as i64;
-                match m {
-                    3 => modal.spindle = Spindle::Cw,
-                    4 => modal.spindle = Spindle::Ccw,
-                    5 => modal.spindle = Spindle::Off,
-                    7 => modal.mist = true,
-                    8 => modal.flood = true,
-                    9 => {
-                        modal.mist = false;
-                        modal.flood = false;
-                    }
-                    2 | 30 => {
-                        let keep_feed = modal.feed_mm_min;
-                        *modal = Modal {
-                            units: modal.units,
-                            feed_mm_min: keep_feed,
-                            spindle_rpm: modal.spindle_rpm,
-                            ..Modal::default()
-                        };
-                        modal.motion = MotionMode::Linear;
-                    }
-                    _ => {}
-                }
-            }
-            'X' => axis[0] = Some(w.value),
-            'Y' => axis[1] = Some(w.value),
-            'Z' => axis[2] = Some(w.value),
-            _ => {}
+/// Run a block through the interpreter as GRBL 1.1h reads it, and note on `line` what it does: the modal
+/// state and work position after it, whether and how it moves, whether it leaves the position unknown. A
+/// block GRBL would refuse is noted ([`Line::refusal`]) and changes nothing.
+fn model(interp: &mut Interpreter, ws: &[Word], line: &mut Line) {
+    let known_before = interp.known;
+    let step = match interp.block(ws) {
+        Ok(step) => step,
+        Err(e) => {
+            line.refusal = Some(e);
+            return;
         }
-    }
-    // F and S after units are settled (a block may carry G20 and F together).
-    for w in ws {
-        match w.letter {
-            'F' => modal.feed_mm_min = Some(w.value * scale(modal)),
-            'S' => modal.spindle_rpm = w.value,
-            _ => {}
+    };
+    if let Some(motion) = step.motion {
+        let probe = matches!(step.modal.motion, MotionMode::Probe { .. });
+        if probe {
+            // a probing move stops wherever the probe touches: where it ends is unknowable here
+            interp.known = [false; 3];
         }
+        line.motion = match motion {
+            Motion::Stored { .. } => None,
+            _ => Some(step.modal.motion),
+        };
+        let end = interp.work_position();
+        let displaced = (0..3).any(|i| match (line.start_mm[i], end[i]) {
+            (Some(a), Some(b)) => (a - b).abs() > 1e-9,
+            (None, None) => step.parsed.axes()[i].is_some(),
+            _ => true,
+        });
+        // an arc always moves (one whose end is its start is a full circle)
+        line.moves = displaced || matches!(motion, Motion::Arc { .. }) || !step.geometry_known;
     }
-    if let Some(m) = motion_word {
-        modal.motion = m;
-    }
-    let has_axis = axis.iter().any(Option::is_some);
-    // a probing move stops wherever the probe touches: where it ends is unknowable here
-    let probing = has_axis && matches!(modal.motion, MotionMode::Probe { .. });
-    if probing {
-        line.motion = Some(modal.motion);
-    }
-    if non_modal_motion || probing {
-        line.breaks_position = true;
-        line.moves = true;
-        *pos = [None; 3];
-        return;
-    }
-    if !has_axis || modal.motion == MotionMode::Cancel {
-        return;
-    }
-    let k = scale(modal);
-    let mut target = *pos;
-    for i in 0..3 {
-        if let Some(v) = axis[i] {
-            target[i] = match modal.distance {
-                Distance::Absolute => Some(v * k),
-                Distance::Incremental => pos[i].map(|p| p + v * k),
-            };
-        }
-    }
-    let displaced = (0..3).any(|i| match (pos[i], target[i]) {
-        (Some(a), Some(b)) => (a - b).abs() > 1e-9,
-        (None, None) => axis[i].is_some(),
-        _ => true,
-    });
-    line.motion = Some(modal.motion);
-    line.moves = displaced;
-    *pos = target;
+    line.after = interp.modal;
+    line.end_mm = interp.work_position();
+    line.breaks_position = (0..3).any(|i| known_before[i] && !interp.known[i])
+        || step
+            .parsed
+            .non_modal
+            .is_some_and(|n| !matches!(n.0, NonModal::SetStored(_)))
+        || step.parsed.tool_length.is_some()
+        || matches!(step.modal.motion, MotionMode::Probe { .. }) && step.motion.is_some();
 }
 
 #[cfg(test)]

@@ -25,14 +25,15 @@
 //! Unknown keys are refused with their line; the machine profile, the tool and the combination of
 //! parameters are checked before any work starts ([`Job::load`]).
 
-use crate::brdf::Brdf;
-use crate::design::DesignConfig;
-use crate::facets::FacetsConfig;
-use crate::ndf::NdfConfig;
-use crate::svbrdf::{Labels, SvbrdfSection};
-use crate::tool::Shape;
-use crate::toolpath::{machine::Machine, ToolpathConfig};
-use crate::verify::VerifyConfig;
+use crate::cut::machine::Machine;
+use crate::cut::tool::Shape;
+use crate::stages::brdf::Brdf;
+use crate::stages::design::DesignConfig;
+use crate::stages::facets::FacetsConfig;
+use crate::stages::ndf::NdfConfig;
+use crate::stages::svbrdf::{Labels, SvbrdfSection};
+use crate::stages::toolpath::ToolpathConfig;
+use crate::stages::verify::VerifyConfig;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -47,7 +48,7 @@ pub struct TargetSection {
     #[serde(default, skip_serializing_if = "String::is_empty")]
     pub brdf: String,
     /// A drawn highlight (PNG, relative to the job file) as the target instead of a BRDF
-    /// ([`crate::brdf::highlight`]).
+    /// ([`crate::stages::brdf::highlight`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub highlight: Option<String>,
     /// The angle of reflection at the ends of the highlight image's longer axis, degrees.
@@ -171,7 +172,7 @@ pub enum JobError {
     },
     /// An output could not be written.
     #[error(transparent)]
-    Write(#[from] crate::io::WriteError),
+    Write(#[from] crate::base::io::WriteError),
 }
 
 /// One region of a spatially varying target, ready to run.
@@ -338,8 +339,8 @@ impl Job {
         }
         check_work(&job, tool.radius_mm()).map_err(invalid)?;
         // everything the toolpath stage checks without the tile, now rather than after the design
-        crate::toolpath::machine::program_text("name", &job.name).map_err(|e| invalid(e.to_string()))?;
-        crate::toolpath::check_config(&job.toolpath_config(), &machine, job.facets.pitch_um * 1e-3)
+        crate::cut::machine::program_text("name", &job.name).map_err(|e| invalid(e.to_string()))?;
+        crate::stages::toolpath::check_config(&job.toolpath_config(), &machine, job.facets.pitch_um * 1e-3)
             .map_err(|e| invalid(e.to_string()))?;
         job.verify.validate().map_err(|e| invalid(e.to_string()))?;
         let labels = match &job.svbrdf {
@@ -389,7 +390,7 @@ fn target_spec(
             Ok((format!("{section}.brdf"), resolve_spec(brdf, dir)))
         }
         (Some(path), true) => {
-            let spec = crate::brdf::highlight::spec(path, extent, material.as_deref())
+            let spec = crate::stages::brdf::highlight::spec(path, extent, material.as_deref())
                 .map_err(|e| format!("`{section}.highlight`: {e}"))?;
             Ok((format!("{section}.highlight"), resolve_spec(&spec, dir)))
         }
@@ -413,25 +414,25 @@ fn region_targets(t: &TargetSection, sv: &SvbrdfSection, dir: &Path) -> Result<V
             sv.region.len()
         ));
     }
-    if sv.region.len() > crate::svbrdf::MAX_REGIONS {
+    if sv.region.len() > crate::stages::svbrdf::MAX_REGIONS {
         return Err(format!(
             "`[svbrdf]` has {} regions; at most {}",
             sv.region.len(),
-            crate::svbrdf::MAX_REGIONS
+            crate::stages::svbrdf::MAX_REGIONS
         ));
     }
     let mut out: Vec<RegionTarget> = vec![];
     for (k, r) in sv.region.iter().enumerate() {
         let section = format!("svbrdf.region[{}]", k + 1);
-        crate::svbrdf::check_name(&r.name).map_err(|e| format!("`{section}.name`: {e}"))?;
-        let color = crate::svbrdf::parse_color(&r.color).map_err(|e| format!("`{section}.color`: {e}"))?;
+        crate::stages::svbrdf::check_name(&r.name).map_err(|e| format!("`{section}.name`: {e}"))?;
+        let color = crate::stages::svbrdf::parse_color(&r.color).map_err(|e| format!("`{section}.color`: {e}"))?;
         if let Some(o) = out.iter().find(|o| o.name == r.name) {
             return Err(format!("`{section}.name`: `{}` is already a region's name", o.name));
         }
         if let Some(o) = out.iter().find(|o| o.color == color) {
             return Err(format!(
                 "`{section}.color`: {} is already region `{}`'s colour",
-                crate::svbrdf::hex(color),
+                crate::stages::svbrdf::hex(color),
                 o.name
             ));
         }
@@ -458,11 +459,11 @@ fn read_labels(job: &Job, sv: &SvbrdfSection, regions: &[RegionTarget], dir: &Pa
     let [ax, ay] = job.toolpath.area_mm;
     let pitch_mm = f.pitch_um * 1e-3;
     let cells = (ax / pitch_mm).round() * (ay / pitch_mm).round();
-    if cells > crate::svbrdf::MAX_PART_CELLS as f64 {
+    if cells > crate::stages::svbrdf::MAX_PART_CELLS as f64 {
         return Err(format!(
             "`[svbrdf]`: the composed part would be {cells:.0} cells (`toolpath.area_mm` = [{ax}, {ay}] at `facets.pitch_um` = {}); at most {}",
             f.pitch_um,
-            crate::svbrdf::MAX_PART_CELLS
+            crate::stages::svbrdf::MAX_PART_CELLS
         ));
     }
     let path = dir.join(&sv.labels);
@@ -494,12 +495,12 @@ fn make_missing_merl(t: &TargetSection, dir: &Path) -> Result<Option<String>, St
         return Ok(None);
     }
     let source = Brdf::parse(from).map_err(|e| e.to_string())?;
-    if matches!(source.model, crate::brdf::Model::Merl(_)) {
+    if matches!(source.model, crate::stages::brdf::Model::Merl(_)) {
         return Err(format!(
             "`{from}` is itself a MERL file: name an analytic or measured model"
         ));
     }
-    crate::brdf::Merl::from_fn(|wi, wo| source.eval(wi, wo))
+    crate::stages::brdf::Merl::from_fn(|wi, wo| source.eval(wi, wo))
         .write(&path)
         .map_err(|e| e.to_string())?;
     Ok(Some(format!(
@@ -513,7 +514,7 @@ pub const FLUTE_MARGIN: f64 = 0.1;
 
 /// The relief budget from the finishing tool and the machine, mm: the flutes less [`FLUTE_MARGIN`], never
 /// more than the machine's Z travel less its clearance height (DESIGN.md §4.4).
-pub fn tool_relief_budget(tool: &crate::toolpath::machine::Tool, machine: &Machine) -> f64 {
+pub fn tool_relief_budget(tool: &crate::cut::machine::Tool, machine: &Machine) -> f64 {
     let flutes = tool.flute_length_mm * (1.0 - FLUTE_MARGIN);
     flutes.min(machine.travel.z_mm - machine.program.clearance_z())
 }
@@ -523,12 +524,7 @@ pub fn tool_relief_budget(tool: &crate::toolpath::machine::Tool, machine: &Machi
 /// what limits a facet is its own height: a square facet of side `a` with slopes `(p, q)` rises
 /// `a(|p| + |q|)` corner to corner, at most `√2·a·tan θ`, and no facet may be taller than the relief the
 /// flutes can cut, so `tan θ ≤ B/(√2·a)`. Never steeper than the NDF grid reaches (`ndf.max_angle_deg`).
-pub fn tool_slope_cap(
-    tool: &crate::toolpath::machine::Tool,
-    budget_mm: f64,
-    facet_mm: f64,
-    grid_deg: f64,
-) -> (f64, String) {
+pub fn tool_slope_cap(tool: &crate::cut::machine::Tool, budget_mm: f64, facet_mm: f64, grid_deg: f64) -> (f64, String) {
     let deg = (budget_mm / (std::f64::consts::SQRT_2 * facet_mm)).atan().to_degrees();
     if deg <= grid_deg {
         (
@@ -616,7 +612,7 @@ fn check_work(job: &Job, r_mm: f64) -> Result<(), String> {
                 t.scallop_um
             ));
         }
-        crate::toolpath::raster::stepover_for_scallop(r_mm, h)
+        crate::stages::toolpath::raster::stepover_for_scallop(r_mm, h)
     };
     let passes = ax.hypot(ay) / stepover;
     if passes > MAX_PASSES {
@@ -704,8 +700,8 @@ mod tests {
         );
         let model = Brdf::parse("beckmann:alpha=0.3").unwrap();
         let (wi, wo) = (
-            crate::geometry::spherical(0.4, 0.3),
-            crate::geometry::spherical(0.3, 2.9),
+            crate::base::geometry::spherical(0.4, 0.3),
+            crate::base::geometry::spherical(0.3, 2.9),
         );
         let (a, b) = (again.target.eval(&wi, &wo)[1], model.eval(&wi, &wo)[1]);
         assert!((a / b - 1.0).abs() < 0.05, "{a} against {b}");

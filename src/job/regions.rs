@@ -7,9 +7,9 @@ use super::run::{
     Out, Outcome, Progress, Stage,
 };
 use super::{JobError, Ready};
-use crate::svbrdf;
-use crate::verify::regions::{RegionInput, RegionsInput};
-use crate::verify::report;
+use crate::stages::svbrdf;
+use crate::stages::verify::regions::{RegionInput, RegionsInput};
+use crate::stages::verify::report;
 use std::path::Path;
 
 /// The polish lobe's Beckmann α when the job names none (the moving-light pictures only).
@@ -44,7 +44,7 @@ pub(super) fn run(
         let nd = ndf_stage(ready, &reg.target, &format!("-{}", reg.name), r, stepover, &mut o)?;
         outcome
             .warnings
-            .extend(crate::ndf::grid_warning(&nd.ndf).map(|w| format!("region `{}`: {w}", reg.name)));
+            .extend(crate::stages::ndf::grid_warning(&nd.ndf).map(|w| format!("region `{}`: {w}", reg.name)));
         nds.push(nd);
     }
     o.done(progress, Stage::Ndf)?;
@@ -64,7 +64,7 @@ pub(super) fn run(
         figures.push(fig);
         tiles.push(tile);
     }
-    let hfs: Vec<&crate::heightfield::Heightfield> = tiles.iter().map(|t| &t.heightfield).collect();
+    let hfs: Vec<&crate::base::heightfield::Heightfield> = tiles.iter().map(|t| &t.heightfield).collect();
     let part = svbrdf::compose(&hfs, labels, job.facets.max_relief_mm).map_err(stage_err("facets"))?;
     o.npy("part.npy", &part.heightfield)?;
     let part_fig = report::Figure::new(
@@ -118,10 +118,10 @@ pub(super) fn run(
     o.start(progress, Stage::Verify);
     // the moving light's lobe: the polish's roughness (a GGX or anisotropic polish by its mean α)
     let polish_alpha = match nds[0].polish.as_ref().map(|b| &b.model) {
-        Some(crate::brdf::Model::Microfacet(m)) => (m.alpha_x * m.alpha_y).sqrt(),
+        Some(crate::stages::brdf::Model::Microfacet(m)) => (m.alpha_x * m.alpha_y).sqrt(),
         _ => DEFAULT_POLISH_ALPHA,
     };
-    let (metrics, vfigs) = crate::verify::regions::run(
+    let (metrics, vfigs) = crate::stages::verify::regions::run(
         &job.verify,
         &RegionsInput {
             regions: ready

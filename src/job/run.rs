@@ -2,14 +2,14 @@
 //! sequencing lives here; what each stage computes is the stage's own `run`.
 
 use super::{resolve_spec, JobError, Ready};
-use crate::brdf::Brdf;
-use crate::design::{self, DesignInput, Round};
-use crate::facets::{self, Tile, TileFile};
-use crate::ndf::{self, Kernel, Ndf, NdfFile};
-use crate::simulate::{self, Deviation, SimFile, SimulateConfig, Simulation};
-use crate::tool::Shape;
-use crate::toolpath::{self, raster};
-use crate::verify::{self, report, Metrics, VerifyInput};
+use crate::cut::tool::Shape;
+use crate::stages::brdf::Brdf;
+use crate::stages::design::{self, DesignInput, Round};
+use crate::stages::facets::{self, Tile, TileFile};
+use crate::stages::ndf::{self, Kernel, Ndf, NdfFile};
+use crate::stages::simulate::{self, Deviation, SimFile, SimulateConfig, Simulation};
+use crate::stages::toolpath::{self, raster};
+use crate::stages::verify::{self, report, Metrics, VerifyInput};
 use std::path::{Path, PathBuf};
 
 /// Pipeline stages, in order (for progress reporting and `--until`).
@@ -111,7 +111,7 @@ fn write_state(o: &mut Out, job: &str, done: &[(Stage, f64)], state: &str) -> Re
         "stages_done": done.iter().map(|(s, _)| s.name()).collect::<Vec<_>>(),
     });
     let p = o.dir.join(RUN_STATE);
-    crate::io::write_atomic(&p, serde_json::to_string_pretty(&v).unwrap_or_default().as_bytes())?;
+    crate::base::io::write_atomic(&p, serde_json::to_string_pretty(&v).unwrap_or_default().as_bytes())?;
     Ok(())
 }
 
@@ -161,13 +161,13 @@ impl<'a> Out<'a> {
 
     pub(super) fn write(&mut self, name: &str, bytes: &[u8]) -> Result<(), JobError> {
         let p = self.dir.join(name);
-        crate::io::write_atomic(&p, bytes)?;
+        crate::base::io::write_atomic(&p, bytes)?;
         self.written.push(p);
         Ok(())
     }
 
     /// Write a heightfield as `.npy`.
-    pub(super) fn npy(&mut self, name: &str, hf: &crate::heightfield::Heightfield) -> Result<(), JobError> {
+    pub(super) fn npy(&mut self, name: &str, hf: &crate::base::heightfield::Heightfield) -> Result<(), JobError> {
         let p = self.dir.join(name);
         hf.write_npy(&p)?;
         self.written.push(p);
@@ -261,7 +261,7 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
     let mut outcome = empty_outcome(ready);
     o.start(progress, Stage::Ndf);
     let nd = ndf_stage(ready, &ready.target, "", r, stepover, &mut o)?;
-    outcome.warnings.extend(crate::ndf::grid_warning(&nd.ndf));
+    outcome.warnings.extend(crate::stages::ndf::grid_warning(&nd.ndf));
     o.done(progress, Stage::Ndf)?;
     if until == Stage::Ndf {
         return o.finish(outcome);
@@ -350,10 +350,10 @@ pub(super) fn design_stage(
     nd: &NdfStage,
     target: &Brdf,
     scallop: &Kernel,
-    tool: &crate::toolpath::machine::Tool,
+    tool: &crate::cut::machine::Tool,
     stepover: f64,
     progress: &mut dyn FnMut(Progress),
-) -> Result<crate::design::Design, JobError> {
+) -> Result<crate::stages::design::Design, JobError> {
     let job = &ready.job;
     let tol = &job.verify.tolerances;
     design::run(
@@ -375,8 +375,8 @@ pub(super) fn design_stage(
             highlight_corr_min: tol.highlight_corr_min,
         },
         &mut |p| match p {
-            crate::design::Progress::Arrangement(r) => progress(Progress::Arrangement(r)),
-            crate::design::Progress::Round(r) => progress(Progress::Round(r)),
+            crate::stages::design::Progress::Arrangement(r) => progress(Progress::Arrangement(r)),
+            crate::stages::design::Progress::Round(r) => progress(Progress::Round(r)),
         },
     )
     .map_err(stage_err("facets"))
@@ -395,9 +395,9 @@ pub(super) struct Cut {
 #[allow(clippy::too_many_arguments)]
 pub(super) fn program_and_cut(
     ready: &Ready,
-    design: &crate::heightfield::Heightfield,
+    design: &crate::base::heightfield::Heightfield,
     design_file: &str,
-    tool: &crate::toolpath::machine::Tool,
+    tool: &crate::cut::machine::Tool,
     until: Stage,
     o: &mut Out,
     outcome: &mut Outcome,
@@ -430,7 +430,7 @@ pub(super) fn program_and_cut(
 /// The design heightfield → `program.nc`, `program.json`.
 fn toolpath_stage(
     ready: &Ready,
-    design: &crate::heightfield::Heightfield,
+    design: &crate::base::heightfield::Heightfield,
     o: &mut Out,
 ) -> Result<toolpath::Toolpath, JobError> {
     let job = &ready.job;
@@ -528,7 +528,7 @@ fn simulate_stage(
     ready: &Ready,
     shape: Shape,
     gcode: &str,
-    design: &crate::heightfield::Heightfield,
+    design: &crate::base::heightfield::Heightfield,
     design_file: &str,
     o: &mut Out,
 ) -> Result<(Simulation, Deviation, [report::Figure; 2]), JobError> {

@@ -1,10 +1,10 @@
 //! The report's tables of what was run: the job's parameters and the G-code program's numbers.
 
 use super::Ready;
-use crate::facets::Tile;
-use crate::ndf::Ndf;
-use crate::simulate::{Deviation, Simulation};
-use crate::toolpath::{self, Summary};
+use crate::stages::facets::Tile;
+use crate::stages::ndf::Ndf;
+use crate::stages::simulate::{Deviation, Simulation};
+use crate::stages::toolpath::{self, Summary};
 
 /// The parameters table.
 pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) -> Vec<(String, String)> {
@@ -88,7 +88,7 @@ pub(super) fn region_parameters(
     ready: &Ready,
     ndfs: &[&Ndf],
     tiles: &[Tile],
-    part: &crate::svbrdf::Part,
+    part: &crate::stages::svbrdf::Part,
     sim: &Simulation,
 ) -> Vec<(String, String)> {
     const PER_TARGET: [&str; 5] = [
@@ -113,7 +113,7 @@ pub(super) fn region_parameters(
     }
     for ((reg, n), (t, off)) in ready.regions.iter().zip(ndfs).zip(tiles.iter().zip(&part.offsets_mm)) {
         rows.push((
-            format!("region `{}` ({})", reg.name, crate::svbrdf::hex(reg.color)),
+            format!("region `{}` ({})", reg.name, crate::stages::svbrdf::hex(reg.color)),
             format!(
                 "{}; {} deconvolution iterations; tile {}; offset {off:+.3} mm in the part; steps {:.1} µm rms",
                 n.brdf_spec,
@@ -129,8 +129,8 @@ pub(super) fn region_parameters(
             "{:.3} mm relief, tiles aligned by their {}",
             part.relief_mm,
             match part.alignment {
-                crate::svbrdf::Alignment::Mean => "mean heights",
-                crate::svbrdf::Alignment::Top => "tops (mean alignment would exceed the relief budget)",
+                crate::stages::svbrdf::Alignment::Mean => "mean heights",
+                crate::stages::svbrdf::Alignment::Top => "tops (mean alignment would exceed the relief budget)",
             }
         ),
     ));
@@ -147,7 +147,7 @@ fn relief_line(job: &super::Job, tile: &Tile) -> String {
         return format!("{relief:.3} mm (no budget)");
     }
     let a = &tile.arrangement;
-    let corners = crate::facets::relief::relief_mm(&a.p, &a.q, &tile.z_mm, tile.config.facet_mm);
+    let corners = crate::stages::facets::relief::relief_mm(&a.p, &a.q, &tile.z_mm, tile.config.facet_mm);
     let held = corners >= budget - 1e-6;
     format!(
         "{relief:.3} mm of a {budget:.3} mm budget (`facets.max_relief_mm`: the finishing tool's flutes less 10% unless the job sets it); {}",

@@ -1,0 +1,467 @@
+//! The lowest point of a bit swept along one straight segment, above a point `(x, y)`: the height the
+//! segment leaves the stock at, `stock = min(stock, sweep)` (DESIGN.md §5).
+//!
+//! The tip moves from `A` to `B`, `P(t) = A + t (B − A)`, `t ∈ [0, 1]`. The bit's underside at horizontal
+//! distance `ρ` from its axis stands `prof(ρ)` above the tip (the bit continues upward as a cylinder, so a
+//! heightfield sees only its underside). Above `(x, y)` the sweep leaves
+//!
+//! `f(t) = z(t) + prof(ρ(t))`, minimised over the `t` with `ρ(t) ≤ R`,
+//!
+//! where, with `L = |B − A|_xy`, `t_p` the parameter of the foot of the perpendicular from `(x, y)` to the
+//! segment's line and `h` the distance to that line, `ρ(t)² = h² + L² (t − t_p)²`. `ρ` is convex in `t` and
+//! `prof` convex and non-decreasing, so `f` is convex: its minimum over an interval is its stationary point
+//! clamped to the interval.
+//!
+//! - **Ball** (radius `r`, `prof = r − sqrt(r² − ρ²)`), the capsule. With `R'² = r² − h²` and `dz = z_B − z_A`,
+//!   `f'(t) = 0` at `t* = t_p − dz R' / (L sqrt(L² + dz²))`, where `f(t*) = z(t_p) + r − R' sqrt(L² + dz²) / L`.
+//!   Closed form: `f(clamp(t*, 0, 1))`; a clamped `t*` is the lowest point of an end sphere.
+//! - **Flat** (radius `R`, `prof = 0`): `f = z(t)` on the interval `|t − t_p| ≤ sqrt(R² − h²) / L`, clipped to
+//!   `[0, 1]`; the minimum is its lower end (endpoints ordered so that `dz ≥ 0`). Closed form.
+//! - **Bull** (radius `R`, corner radius `rc`, flat of radius `R0 = R − rc`, `prof = rc − sqrt(rc² − (ρ −
+//!   R0)²)` beyond `R0`): no practical closed form (the stationary point solves a quartic). `f` is convex,
+//!   so bisection on the sign of `f'` with the tangent lines at the bracket's ends as a certified lower
+//!   bound, stopped when the bound is within [`BULL_TOLERANCE_MM`] of the best value found; the value
+//!   returned is the best found, never below the true minimum and at most that tolerance above it.
+//!
+//! A segment whose horizontal length is below [`VERTICAL_MM`] is taken as vertical (a plunge or a retract):
+//! the lowest point is then the lower end's.
+
+use crate::cut::tool::Shape;
+use crate::gcode::moves::P3;
+use serde::{Deserialize, Serialize};
+
+/// What a linear segment of the swept path comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SegmentKind {
+    /// `G0`.
+    Rapid,
+    /// `G1`.
+    Feed,
+    /// A chord of a `G2`/`G3` arc.
+    Arc,
+}
+
+/// One straight piece of the tool-tip path, mm, in work coordinates.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Segment {
+    /// Start of the tip.
+    pub from: P3,
+    /// End of the tip.
+    pub to: P3,
+    /// Where it comes from.
+    pub kind: SegmentKind,
+    /// The program line, from 1.
+    pub line: u32,
+    /// The tool in the spindle (the number of the last `T… M6`; 0 before any).
+    #[serde(default)]
+    pub tool: u32,
+}
+
+/// Horizontal length below which a segment counts as vertical, mm (0.1 nm).
+pub const VERTICAL_MM: f64 = 1e-7;
+
+/// Largest amount by which a bull-nose sweep height may exceed the exact minimum, mm (1 pm).
+pub const BULL_TOLERANCE_MM: f64 = 1e-9;
+
+/// A cell counts as lowered by a segment (for the report of rapids that cut) only when by more than this, mm
+/// (1 nm): a retract from the bottom of a cut re-sweeps the end sphere the cut already left, up to rounding.
+pub const LOWERED_MM: f64 = 1e-6;
+
+/// One segment prepared for sweeping: endpoints ordered so that `dz ≥ 0`, constants of the closed forms.
+#[derive(Clone, Copy, Debug)]
+pub struct Sweep {
+    bit: Shape,
+    ax: f64,
+    ay: f64,
+    az: f64,
+    dx: f64,
+    dy: f64,
+    dz: f64,
+    /// `1 / L²` (0 for a vertical segment).
+    inv_l2: f64,
+    /// `1 / L` (0 for a vertical segment).
+    inv_l: f64,
+    /// Ball: `dz / (L sqrt(L² + dz²))`.
+    c1: f64,
+    r: f64,
+    r2: f64,
+}
+
+impl Sweep {
+    /// Prepare the sweep of `bit` with its tip from `a` to `b` (mm).
+    pub fn new(bit: Shape, a: P3, b: P3) -> Self {
+        // The swept solid does not depend on the direction of travel: order so that z rises.
+        let (a, b) = if b[2] < a[2] { (b, a) } else { (a, b) };
+        let (mut dx, mut dy, dz) = (b[0] - a[0], b[1] - a[1], b[2] - a[2]);
+        let mut l2 = dx * dx + dy * dy;
+        if l2 < VERTICAL_MM * VERTICAL_MM {
+            (dx, dy, l2) = (0.0, 0.0, 0.0);
+        }
+        let (inv_l2, inv_l, c1) = if l2 > 0.0 {
+            let l = l2.sqrt();
+            (1.0 / l2, 1.0 / l, dz / (l * (l2 + dz * dz).sqrt()))
+        } else {
+            (0.0, 0.0, 0.0)
+        };
+        let r = bit.radius_mm();
+        Self {
+            bit,
+            ax: a[0],
+            ay: a[1],
+            az: a[2],
+            dx,
+            dy,
+            dz,
+            inv_l2,
+            inv_l,
+            c1,
+            r,
+            r2: r * r,
+        }
+    }
+
+    /// The lowest tip height along the segment, mm: no point of the sweep is lower.
+    pub fn z_min(&self) -> f64 {
+        self.az
+    }
+
+    /// A lower bound of the sweep over the cells of row `y` from `x_lo` to `x_hi`: the lowest tip plus the
+    /// profile at their distance from the segment's bounding box (`+∞` beyond the radius).
+    #[inline(always)]
+    pub fn floor(&self, x_lo: f64, x_hi: f64, y: f64) -> f64 {
+        let (bx, by) = (self.ax + self.dx, self.ay + self.dy);
+        let dy = (self.ay.min(by) - y).max(y - self.ay.max(by)).max(0.0);
+        let dx = (self.ax.min(bx) - x_hi).max(x_lo - self.ax.max(bx)).max(0.0);
+        let d = (dx * dx + dy * dy).sqrt();
+        if d > self.r {
+            f64::INFINITY
+        } else {
+            self.az + self.bit.profile(d)
+        }
+    }
+
+    /// `(x_min, y_min, x_max, y_max)` of the swept footprint, mm.
+    pub fn footprint(&self) -> [f64; 4] {
+        let (bx, by) = (self.ax + self.dx, self.ay + self.dy);
+        [
+            self.ax.min(bx) - self.r,
+            self.ay.min(by) - self.r,
+            self.ax.max(bx) + self.r,
+            self.ay.max(by) + self.r,
+        ]
+    }
+
+    /// The x interval of the footprint (points within the bit's radius of the segment) on the line at `y`,
+    /// widened by a hair so that points on its rim are inside; None when the line misses it.
+    #[inline(always)]
+    pub fn row_span(&self, y: f64) -> Option<(f64, f64)> {
+        let (r, r2) = (self.r, self.r2);
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        // the end discs
+        for (cx, cy) in [(self.ax, self.ay), (self.ax + self.dx, self.ay + self.dy)] {
+            let d2 = r2 - (y - cy) * (y - cy);
+            if d2 >= 0.0 {
+                let w = d2.sqrt();
+                lo = lo.min(cx - w);
+                hi = hi.max(cx + w);
+            }
+        }
+        // the band: |cross| ≤ r L and 0 ≤ projection ≤ L², both linear in x
+        if self.inv_l2 > 0.0 {
+            let ey = y - self.ay;
+            let l = 1.0 / self.inv_l;
+            // cross(x) = (x − ax) dy − ey dx ∈ [−rL, rL]; proj(x) = (x − ax) dx + ey dy ∈ [0, L²]
+            let mut a = f64::NEG_INFINITY;
+            let mut b = f64::INFINITY;
+            for (k, c, clo, chi) in [
+                (self.dy, -ey * self.dx, -r * l, r * l),
+                (self.dx, ey * self.dy, 0.0, l * l),
+            ] {
+                if k.abs() < 1e-300 {
+                    if c < clo || c > chi {
+                        a = f64::INFINITY;
+                    }
+                } else {
+                    let (u, v) = ((clo - c) / k, (chi - c) / k);
+                    a = a.max(u.min(v));
+                    b = b.min(u.max(v));
+                }
+            }
+            if a <= b {
+                lo = lo.min(self.ax + a);
+                hi = hi.max(self.ax + b);
+            }
+        }
+        (lo <= hi).then(|| {
+            let e = 1e-9 * (1.0 + r);
+            (lo - e, hi + e)
+        })
+    }
+
+    /// The height the sweep leaves above `(x, y)`, mm; `+∞` when the bit does not pass over it (the tests'
+    /// pointwise form of [`Sweep::row`]).
+    #[cfg(test)]
+    pub fn lowest(&self, x: f64, y: f64) -> f64 {
+        let mut z = [f64::INFINITY];
+        self.row(y, x, 0.0, &mut z);
+        z[0]
+    }
+
+    /// `row[i] = min(row[i], sweep at (x0 + i·pitch, y))` for every cell of a row; returns the number of cells
+    /// the footprint covers and whether any cell was lowered.
+    #[inline(always)]
+    pub fn row(&self, y: f64, x0: f64, pitch: f64, row: &mut [f64]) -> (usize, bool) {
+        assert!(i32::try_from(row.len()).is_ok(), "a row of {} cells", row.len());
+        let ey = y - self.ay;
+        let ex0 = x0 - self.ax;
+        let (dx, dy, dz, az, r, r2) = (self.dx, self.dy, self.dz, self.az, self.r, self.r2);
+        let (inv_l2, inv_l, c1) = (self.inv_l2, self.inv_l, self.c1);
+        let (ey2, eyd) = (ey * ey, ey * dy);
+        // cells on the rim count as covered, within the drop-cutter's relative 1e-12 (`cut::dropcutter`):
+        // the two must agree there, or a tip the drop-cutter holds up by a rim cell never lowers that cell
+        let rim = r2 * 1e-12;
+        let mut hits = 0;
+        let mut lowered = false;
+        match self.bit {
+            // (selects and non-short-circuit `&`, with the column counted in `i32`, so that the loops
+            // compile to vector instructions)
+            Shape::Ball { .. } => {
+                for (i, cell) in (0i32..).zip(row.iter_mut()) {
+                    let ex = ex0 + f64::from(i) * pitch;
+                    let ed = ex * dx + eyd;
+                    let tp = ed * inv_l2;
+                    let rp2 = r2 - (ex * ex + ey2 - ed * tp);
+                    let rp = rp2.max(0.0).sqrt();
+                    let t = (tp - rp * c1).clamp(0.0, 1.0);
+                    let (fx, fy) = (ex - t * dx, ey - t * dy);
+                    let s = r2 - (fx * fx + fy * fy);
+                    let z = az + t * dz + r - s.max(0.0).sqrt();
+                    let inside = (rp2 >= -rim) & (s >= -rim);
+                    let c = *cell;
+                    hits += inside as usize;
+                    lowered |= inside & (z < c - LOWERED_MM);
+                    *cell = if inside & (z < c) { z } else { c };
+                }
+            }
+            Shape::Flat { .. } => {
+                for (i, cell) in (0i32..).zip(row.iter_mut()) {
+                    let ex = ex0 + f64::from(i) * pitch;
+                    let ed = ex * dx + eyd;
+                    let tp = ed * inv_l2;
+                    let rp2 = r2 - (ex * ex + ey2 - ed * tp);
+                    let w = rp2.max(0.0).sqrt() * inv_l;
+                    let t = (tp - w).max(0.0);
+                    let inside = (rp2 >= -rim) & (t <= (tp + w).min(1.0));
+                    let z = az + t * dz;
+                    let c = *cell;
+                    hits += inside as usize;
+                    lowered |= inside & (z < c - LOWERED_MM);
+                    *cell = if inside & (z < c) { z } else { c };
+                }
+            }
+            Shape::Bull { .. } => {
+                for (i, cell) in row.iter_mut().enumerate() {
+                    let ex = ex0 + i as f64 * pitch;
+                    let ed = ex * dx + eyd;
+                    let tp = ed * inv_l2;
+                    let h2 = (ex * ex + ey2 - ed * tp).max(0.0);
+                    let rp2 = r2 - h2;
+                    if rp2 < 0.0 {
+                        continue;
+                    }
+                    let w = rp2.sqrt() * inv_l;
+                    let (lo, hi) = ((tp - w).max(0.0), (tp + w).min(1.0));
+                    if lo > hi {
+                        continue;
+                    }
+                    hits += 1;
+                    if az + lo * dz >= *cell {
+                        continue; // no point of the sweep over this cell is lower than its lowest tip
+                    }
+                    let z = self.bull_min(h2, tp, lo, hi);
+                    lowered |= z < *cell - LOWERED_MM;
+                    if z < *cell {
+                        *cell = z;
+                    }
+                }
+            }
+        }
+        (hits, lowered)
+    }
+
+    /// Minimum of the convex `f(t) = z(t) + prof(ρ(t))` over `[lo, hi]` by bisection on the sign of `f'`,
+    /// with a certified lower bound from the tangents at the bracket's ends (see the module comment).
+    fn bull_min(&self, h2: f64, tp: f64, lo: f64, hi: f64) -> f64 {
+        let l2 = if self.inv_l2 > 0.0 { 1.0 / self.inv_l2 } else { 0.0 };
+        let rho = |t: f64| (h2 + l2 * (t - tp) * (t - tp)).sqrt();
+        let f = |t: f64| self.az + t * self.dz + self.bit.profile(rho(t));
+        let df = |t: f64| {
+            let rh = rho(t);
+            let dr = if rh > 0.0 { l2 * (t - tp) / rh } else { 0.0 };
+            let s = self.bit.profile_slope(rh);
+            // 0·∞ at a tangent point of the rim: the slope there is that of z alone
+            self.dz + if dr == 0.0 { 0.0 } else { s * dr }
+        };
+        let (mut a, mut b) = (lo, hi);
+        let (mut fa, mut fb) = (f(a), f(b));
+        let (mut da, mut db) = (df(a), df(b));
+        if hi - lo <= 0.0 || da >= 0.0 {
+            return fa;
+        }
+        if db <= 0.0 {
+            return fb;
+        }
+        let mut best = fa.min(fb);
+        for _ in 0..200 {
+            let lower = if da.is_finite() && db.is_finite() && db > da {
+                let t = (fb - fa + da * a - db * b) / (da - db);
+                fa + da * (t - a)
+            } else {
+                f64::NEG_INFINITY
+            };
+            if best - lower <= BULL_TOLERANCE_MM || b - a <= 1e-15 {
+                break;
+            }
+            let m = 0.5 * (a + b);
+            let (fm, dm) = (f(m), df(m));
+            best = best.min(fm);
+            if dm < 0.0 {
+                (a, fa, da) = (m, fm, dm);
+            } else if dm > 0.0 {
+                (b, fb, db) = (m, fm, dm);
+            } else {
+                break;
+            }
+        }
+        best
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// The slow reference: the bit placed at `n + 1` evenly spaced positions along the segment.
+    fn sampled(bit: Shape, a: P3, b: P3, x: f64, y: f64, n: usize) -> f64 {
+        let r = bit.radius_mm();
+        let mut best = f64::INFINITY;
+        for k in 0..=n {
+            let t = k as f64 / n as f64;
+            let p = [
+                a[0] + t * (b[0] - a[0]),
+                a[1] + t * (b[1] - a[1]),
+                a[2] + t * (b[2] - a[2]),
+            ];
+            let rho = ((x - p[0]).powi(2) + (y - p[1]).powi(2)).sqrt();
+            if rho <= r {
+                best = best.min(p[2] + bit.profile(rho));
+            }
+        }
+        best
+    }
+
+    fn bits() -> impl Strategy<Value = Shape> {
+        prop_oneof![
+            (0.05..2.0f64).prop_map(|r| Shape::Ball { diameter_mm: 2.0 * r }),
+            (0.05..2.0f64).prop_map(|r| Shape::Flat { diameter_mm: 2.0 * r }),
+            (0.1..2.0f64, 0.05..1.0f64).prop_map(|(r, f)| Shape::Bull {
+                diameter_mm: 2.0 * r,
+                corner_radius_mm: r * f
+            }),
+        ]
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig::with_cases(400))]
+        /// The closed forms are never above dense sampling (they are the exact minimum) and within the
+        /// sampling's own resolution of it.
+        #[test]
+        fn closed_form_matches_dense_sampling(
+            bit in bits(),
+            a in prop::array::uniform3(-1.0..1.0f64),
+            b in prop::array::uniform3(-1.0..1.0f64),
+            q in prop::array::uniform2(-2.0..2.0f64),
+            vertical in prop::bool::weighted(0.1),
+        ) {
+            let b = if vertical { [a[0], a[1], b[2]] } else { b };
+            let s = Sweep::new(bit, a, b);
+            let exact = s.lowest(q[0], q[1]);
+            let n = 20_000;
+            let dense = sampled(bit, a, b, q[0], q[1], n);
+            if dense.is_finite() {
+                // exact for ball and flat; the bull's bisection stops within its stated tolerance
+                let slack = if matches!(bit, Shape::Bull { .. }) { BULL_TOLERANCE_MM } else { 1e-12 };
+                prop_assert!(exact <= dense + slack, "{bit:?} {a:?} {b:?} {q:?}: {exact} above sampled {dense}");
+                // between samples the bit moves by |AB|/n; the sweep height changes by at most that times
+                // the steepest slope met, bounded here by sampling twice as finely
+                let finer = sampled(bit, a, b, q[0], q[1], 2 * n);
+                prop_assert!(exact <= finer + slack);
+                prop_assert!(dense - exact <= 2.0 * (dense - finer).max(0.0) + 2e-4,
+                    "{bit:?}: exact {exact} dense {dense} finer {finer}");
+            }
+            // the footprint interval contains every covered point of the row
+            if exact.is_finite() {
+                let (lo, hi) = s.row_span(q[1]).expect("covered point outside the row span");
+                prop_assert!(lo <= q[0] && q[0] <= hi);
+            }
+        }
+
+        /// A point the row span excludes is not covered.
+        #[test]
+        fn row_span_is_tight(
+            bit in bits(),
+            a in prop::array::uniform3(-1.0..1.0f64),
+            b in prop::array::uniform3(-1.0..1.0f64),
+            y in -2.0..2.0f64,
+        ) {
+            let s = Sweep::new(bit, a, b);
+            if let Some((lo, hi)) = s.row_span(y) {
+                prop_assert!(s.lowest(lo - 1e-6, y).is_infinite() && s.lowest(hi + 1e-6, y).is_infinite());
+                prop_assert!(s.lowest(0.5 * (lo + hi), y).is_finite());
+            } else {
+                for x in [-3.0, -1.0, 0.0, 1.0, 3.0] {
+                    prop_assert!(s.lowest(x, y).is_infinite());
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn ball_closed_form_on_the_capsule_axis() {
+        // Horizontal segment: the cross-section is the circle z = z0 + r − sqrt(r² − d²).
+        let s = Sweep::new(Shape::Ball { diameter_mm: 1.0 }, [0.0, 0.0, -0.2], [2.0, 0.0, -0.2]);
+        for d in [0.0, 0.1, 0.3, 0.49] {
+            let z = s.lowest(1.0, d);
+            assert!((z - (-0.2 + 0.5 - (0.25f64 - d * d).sqrt())).abs() < 1e-15, "{d}: {z}");
+        }
+        // Sloped segment seen in the middle: the capsule's cross-section perpendicular to the axis is a
+        // circle, so the lowest point is r·sqrt(1 + m²) − r below the axis line's tip height (m the slope).
+        let m: f64 = 0.4;
+        let s = Sweep::new(Shape::Ball { diameter_mm: 1.0 }, [0.0, 0.0, 0.0], [2.0, 0.0, 2.0 * m]);
+        let z = s.lowest(1.0, 0.0);
+        let expect = m - (0.5 * (1.0 + m * m).sqrt() - 0.5);
+        assert!((z - expect).abs() < 1e-14, "{z} vs {expect}");
+    }
+
+    #[test]
+    fn flat_leaves_a_flat_floor_and_bull_sits_between() {
+        let (a, b) = ([0.0, 0.0, -0.1], [1.0, 0.3, -0.1]);
+        let flat = Sweep::new(Shape::Flat { diameter_mm: 1.0 }, a, b);
+        let bull = Sweep::new(
+            Shape::Bull {
+                diameter_mm: 1.0,
+                corner_radius_mm: 0.2,
+            },
+            a,
+            b,
+        );
+        let ball = Sweep::new(Shape::Ball { diameter_mm: 1.0 }, a, b);
+        for (x, y) in [(0.5, 0.15), (0.2, 0.4), (0.9, -0.1), (-0.3, 0.1)] {
+            let (f, u, l) = (flat.lowest(x, y), bull.lowest(x, y), ball.lowest(x, y));
+            assert_eq!(f, -0.1);
+            assert!(f <= u && u <= l + 1e-15, "{f} {u} {l}");
+        }
+    }
+}

@@ -1,0 +1,263 @@
+//! `ndf.json`: the versioned file format of the NDF stage.
+//!
+//! ```text
+//! {
+//!   "format": "brdfmill-ndf", "version": 1,
+//!   "nx": 256, "ny": 256, "p_min": -1.732, "p_max": 1.732, "q_min": -1.732, "q_max": 1.732,
+//!   "density":  [nx·ny numbers]   target P22, row-major, rows along q (density[j·nx + i] at p_i, q_j),
+//!                                 cell centres p_i = p_min + (i + ½)(p_max − p_min)/nx; unit mass
+//!   "observed": [nx·ny numbers]   the BRDF's half-angle distribution before deconvolution, same layout
+//!   "stats":          {"mass", "mean": [p, q], "cov": [[pp, pq], [pq, qq]]}   of "density"
+//!   "observed_stats": {same keys}                                             of "observed"
+//!   "tilt_removed":   {"p", "q", "deg"}   mean slope subtracted from both grids (Section 7.2)
+//!   "deconvolution":  {"method", "iterations", "max_iterations", "tolerance", "stopped_by", "last_change"}
+//!   "source": "reflectance" | "measured-ndf",
+//!   "brdf": "SPEC", "base": "SPEC" | null, "material": {"eta": [r,g,b], "k": [r,g,b]} | null,
+//!   "config": {...}   the NdfConfig used
+//!   "mass_beyond_grid": 0.0   fraction of the target's half-angle mass outside the grid (left out of both
+//!                             grids; absent in older files, read as 0)
+//! }
+//! ```
+//!
+//! Readers check the version, the lengths, that every value is finite and non-negative, and that both
+//! grids have unit mass (within 1e-3).
+
+use super::{LrReport, Ndf, NdfConfig, Source, Tilt};
+use crate::base::slope::{SlopeDomain, SlopeGrid, SlopeStats};
+use crate::stages::brdf::ConductorIor;
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// The format tag.
+pub const FORMAT: &str = "brdfmill-ndf";
+/// The current format version.
+pub const VERSION: u32 = 1;
+
+/// Deconvolution report as stored (owned strings).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct DeconvolutionRecord {
+    /// `"lucy-richardson"` or `"none"`.
+    pub method: String,
+    /// Iterations run.
+    pub iterations: usize,
+    /// Iteration limit.
+    pub max_iterations: usize,
+    /// Tolerance on the relative change.
+    pub tolerance: f64,
+    /// `"tolerance"`, `"count"` or `"none"`.
+    pub stopped_by: super::StoppedBy,
+    /// Relative L1 change of the last iteration.
+    pub last_change: f64,
+}
+
+impl From<LrReport> for DeconvolutionRecord {
+    fn from(r: LrReport) -> Self {
+        Self {
+            method: r.method.to_string(),
+            iterations: r.iterations,
+            max_iterations: r.max_iterations,
+            tolerance: r.tolerance,
+            stopped_by: r.stopped_by,
+            last_change: if r.last_change.is_finite() { r.last_change } else { 0.0 },
+        }
+    }
+}
+
+/// The on-disk form of an [`Ndf`].
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct NdfFile {
+    /// Always [`FORMAT`].
+    pub format: String,
+    /// Format version ([`VERSION`]).
+    pub version: u32,
+    /// The slope grid (`nx`, `ny`, `p_min`, `p_max`, `q_min`, `q_max` at the top level of the JSON).
+    #[serde(flatten)]
+    pub domain: SlopeDomain,
+    /// Target `P22`, row-major, rows along q.
+    pub density: Vec<f64>,
+    /// Observed half-angle distribution, same layout.
+    pub observed: Vec<f64>,
+    /// Statistics of `density`.
+    pub stats: SlopeStats,
+    /// Statistics of `observed`.
+    pub observed_stats: SlopeStats,
+    /// The tilt removed.
+    pub tilt_removed: Tilt,
+    /// What the deconvolution did.
+    pub deconvolution: DeconvolutionRecord,
+    /// Where the half-angle distribution came from.
+    pub source: Source,
+    /// Target BRDF spec.
+    pub brdf: String,
+    /// Base lobe spec.
+    pub base: Option<String>,
+    /// Fabrication material.
+    pub material: Option<ConductorIor>,
+    /// Configuration used.
+    pub config: NdfConfig,
+    /// Fraction of the target's half-angle mass outside the slope grid (left out of both distributions).
+    #[serde(default)]
+    pub mass_beyond_grid: f64,
+}
+
+/// An `ndf.json` that cannot be used.
+#[derive(Debug, thiserror::Error)]
+pub enum NdfFileError {
+    /// A file could not be opened or read.
+    #[error(transparent)]
+    Io(#[from] crate::base::io::ReadError),
+    /// Not valid JSON of this format.
+    #[error("{path}: {reason}")]
+    Invalid {
+        /// The file.
+        path: std::path::PathBuf,
+        /// What is wrong, naming the key.
+        reason: String,
+    },
+}
+
+impl From<&Ndf> for NdfFile {
+    fn from(n: &Ndf) -> Self {
+        let d = n.target.domain;
+        Self {
+            format: FORMAT.into(),
+            version: VERSION,
+            domain: d,
+            density: n.target.density.clone(),
+            observed: n.observed.density.clone(),
+            stats: n.stats,
+            observed_stats: n.observed_stats,
+            tilt_removed: n.tilt,
+            deconvolution: n.deconvolution.into(),
+            source: n.source,
+            brdf: n.brdf_spec.clone(),
+            base: n.base_spec.clone(),
+            material: n.material,
+            config: n.config,
+            mass_beyond_grid: n.mass_beyond_grid,
+        }
+    }
+}
+
+impl NdfFile {
+    /// The slope domain.
+    pub fn domain(&self) -> SlopeDomain {
+        self.domain
+    }
+
+    /// The target density as a grid.
+    pub fn target(&self) -> SlopeGrid {
+        SlopeGrid {
+            domain: self.domain(),
+            density: self.density.clone(),
+        }
+    }
+
+    /// The observed density as a grid.
+    pub fn observed(&self) -> SlopeGrid {
+        SlopeGrid {
+            domain: self.domain(),
+            density: self.observed.clone(),
+        }
+    }
+
+    /// Check the invariants readers rely on; the message names the key.
+    pub fn validate(&self) -> Result<(), String> {
+        if self.format != FORMAT {
+            return Err(format!("\"format\" is \"{}\", expected \"{FORMAT}\"", self.format));
+        }
+        if self.version != VERSION {
+            return Err(format!(
+                "\"version\" is {}, this build reads version {VERSION}",
+                self.version
+            ));
+        }
+        for (key, values) in [("density", &self.density), ("observed", &self.observed)] {
+            let g = SlopeGrid {
+                domain: self.domain(),
+                density: values.clone(),
+            };
+            g.check_invariants().map_err(|e| format!("\"{key}\": {e}"))?;
+            let m = g.mass();
+            if (m - 1.0).abs() > 1e-3 {
+                return Err(format!("\"{key}\" has mass {m:.6}, expected 1 (a normalised density)"));
+            }
+        }
+        Ok(())
+    }
+
+    /// Serialise to JSON text.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string(self).expect("NdfFile serialises")
+    }
+
+    /// Write atomically.
+    pub fn write(&self, path: &Path) -> Result<(), crate::base::io::WriteError> {
+        crate::base::io::write_atomic(path, self.to_json().as_bytes())
+    }
+
+    /// Read and validate.
+    pub fn read(path: &Path) -> Result<Self, NdfFileError> {
+        let text = crate::base::io::read_to_string(path)?;
+        let invalid = |reason: String| NdfFileError::Invalid {
+            path: path.to_path_buf(),
+            reason,
+        };
+        let f: NdfFile = serde_json::from_str(&text).map_err(|e| invalid(format!("not a valid ndf.json: {e}")))?;
+        f.validate().map_err(invalid)?;
+        Ok(f)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::stages::brdf::Brdf;
+
+    fn small() -> NdfFile {
+        let cfg = NdfConfig {
+            res: 32,
+            ..Default::default()
+        };
+        let n = super::super::run(&cfg, &Brdf::parse("ggx:alpha=0.3").unwrap(), None).unwrap();
+        NdfFile::from(&n)
+    }
+
+    #[test]
+    fn round_trip_through_a_file() {
+        let f = small();
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("ndf.json");
+        f.write(&p).unwrap();
+        let back = NdfFile::read(&p).unwrap();
+        assert!(back == f, "ndf.json did not round-trip exactly");
+        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&p).unwrap()).unwrap();
+        for key in [
+            "version", "nx", "ny", "p_min", "p_max", "q_min", "q_max", "density", "stats",
+        ] {
+            assert!(v.get(key).is_some(), "missing key {key}");
+        }
+        for key in ["mass", "mean", "cov"] {
+            assert!(v["stats"].get(key).is_some(), "missing stats.{key}");
+        }
+    }
+
+    #[test]
+    fn invalid_files_are_refused_naming_the_key() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("ndf.json");
+        let mut f = small();
+        f.density.iter_mut().for_each(|v| *v *= 2.0);
+        f.write(&p).unwrap();
+        let e = NdfFile::read(&p).unwrap_err().to_string();
+        assert!(e.contains("\"density\" has mass"), "{e}");
+        let mut f = small();
+        f.observed.pop();
+        f.write(&p).unwrap();
+        let e = NdfFile::read(&p).unwrap_err().to_string();
+        assert!(e.contains("\"observed\"") && e.contains("expected nx·ny"), "{e}");
+        std::fs::write(&p, "{\"version\": 1}").unwrap();
+        let e = NdfFile::read(&p).unwrap_err().to_string();
+        assert!(e.contains("not a valid ndf.json") && e.contains("ndf.json"), "{e}");
+    }
+}

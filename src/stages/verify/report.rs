@@ -1,0 +1,234 @@
+//! `report.html`: one page that opens offline — every image is embedded as a `data:` URI, no script, no
+//! external style sheet.
+
+use super::metrics::SurfaceMetrics;
+use super::Metrics;
+use base64::Engine;
+
+/// A picture with a caption.
+pub struct Figure {
+    /// Heading.
+    pub title: String,
+    /// What it shows.
+    pub caption: String,
+    /// PNG bytes.
+    pub png: Vec<u8>,
+    /// Labels the figure could not draw as given ([`crate::base::plot::Canvas::label_defects`]); the page lists
+    /// them under the figure with the class `label-defect`.
+    pub label_defects: Vec<String>,
+}
+
+impl Figure {
+    /// A figure from a drawn canvas (encoded here), keeping its label defects.
+    pub fn new(title: impl Into<String>, caption: impl Into<String>, canvas: &crate::base::plot::Canvas) -> Self {
+        Self {
+            title: title.into(),
+            caption: caption.into(),
+            png: canvas.to_png(),
+            label_defects: canvas.label_defects.clone(),
+        }
+    }
+}
+
+/// What the page's verdict and metrics come from.
+pub enum Verdict<'a> {
+    /// One target.
+    Single(&'a Metrics),
+    /// A spatially varying target: one set of metrics per region.
+    Regions(&'a super::RegionsMetrics),
+}
+
+/// Everything the page shows.
+pub struct Report<'a> {
+    /// Job name.
+    pub title: String,
+    /// The metrics.
+    pub verdict: Verdict<'a>,
+    /// Figures in order.
+    pub figures: Vec<Figure>,
+    /// Job parameters as (key, value).
+    pub parameters: Vec<(String, String)>,
+    /// The G-code summary as (key, value).
+    pub program: Vec<(String, String)>,
+    /// Artifacts written, as (file, what).
+    pub artifacts: Vec<(String, String)>,
+}
+
+fn esc(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
+}
+
+fn kv_table(rows: &[(String, String)]) -> String {
+    let mut s = String::from("<table class=\"kv\">");
+    for (k, v) in rows {
+        s.push_str(&format!("<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(v)));
+    }
+    s.push_str("</table>");
+    s
+}
+
+fn fmt(v: f64) -> String {
+    if v == 0.0 || (v.abs() >= 1e-3 && v.abs() < 1e5) {
+        format!("{v:.4}")
+    } else {
+        format!("{v:.3e}")
+    }
+}
+
+fn metrics_table(design: &SurfaceMetrics, milled: &SurfaceMetrics) -> String {
+    let mut s = String::from("<table class=\"metrics\"><tr><th>metric</th><th>tolerance</th><th>design tile</th><th>milled (simulated)</th></tr>");
+    for (d, m) in design.checks.iter().zip(&milled.checks) {
+        let cell = |c: &super::metrics::Check| {
+            format!(
+                "<td class=\"{}\">{} {}</td>",
+                if c.pass { "pass" } else { "fail" },
+                fmt(c.value),
+                if c.pass { "✓" } else { "✗" }
+            )
+        };
+        s.push_str(&format!(
+            "<tr><td>{}</td><td>{}</td>{}{}</tr>",
+            esc(&d.name),
+            esc(&d.tolerance),
+            cell(d),
+            cell(m)
+        ));
+    }
+    s.push_str("</table>");
+    s
+}
+
+impl Report<'_> {
+    /// The HTML text.
+    pub fn to_html(&self) -> String {
+        let b64 = base64::engine::general_purpose::STANDARD;
+        let mut h = String::with_capacity(1 << 20);
+        h.push_str("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">");
+        h.push_str(&format!("<title>brdfmill report — {}</title>", esc(&self.title)));
+        h.push_str(
+            "<style>body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}\
+             h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.6em}\
+             table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:.25em .6em;text-align:left}\
+             td.pass{background:#e6f4ea}td.fail{background:#fde8e8}.verdict{font-size:1.2em;padding:.6em 1em;border-radius:6px}\
+             .ok{background:#e6f4ea}.no{background:#fde8e8}figure{margin:1em 0}img{max-width:100%;border:1px solid #ddd}\
+             figcaption{color:#555;font-size:.9em}table.kv th{background:#f6f6f6;font-weight:normal}</style></head><body>",
+        );
+        h.push_str(&format!("<h1>brdfmill report — {}</h1>", esc(&self.title)));
+        match self.verdict {
+            Verdict::Single(m) => single(&mut h, m),
+            Verdict::Regions(m) => regions(&mut h, m),
+        }
+        for f in &self.figures {
+            h.push_str(&format!(
+                "<h2>{}</h2><figure><img alt=\"{}\" src=\"data:image/png;base64,{}\"><figcaption>{}</figcaption></figure>",
+                esc(&f.title),
+                esc(&f.title),
+                b64.encode(&f.png),
+                esc(&f.caption)
+            ));
+            for d in &f.label_defects {
+                h.push_str(&format!("<p class=\"label-defect\">Figure defect: {}</p>", esc(d)));
+            }
+        }
+        h.push_str("<h2>Job parameters</h2>");
+        h.push_str(&kv_table(&self.parameters));
+        h.push_str("<h2>To mill this</h2>");
+        h.push_str(&kv_table(&self.program));
+        h.push_str("<h2>Artifacts</h2>");
+        h.push_str(&kv_table(&self.artifacts));
+        h.push_str("<p><small>Generated by brdfmill ");
+        h.push_str(env!("CARGO_PKG_VERSION"));
+        h.push_str(". The page is self-contained: it needs no network.</small></p></body></html>\n");
+        h
+    }
+}
+
+fn failed(checks: &[super::metrics::Check]) -> Vec<String> {
+    checks
+        .iter()
+        .filter(|c| !c.pass)
+        .map(|c| format!("{} = {} (needs {})", c.name, fmt(c.value), c.tolerance))
+        .collect()
+}
+
+fn notes(h: &mut String, notes: &[String]) {
+    if !notes.is_empty() {
+        h.push_str("<h2>Why</h2><ul>");
+        for n in notes {
+            h.push_str(&format!("<li>{}</li>", esc(n)));
+        }
+        h.push_str("</ul>");
+    }
+}
+
+/// Verdict, reasons and metrics of a single target.
+fn single(h: &mut String, m: &Metrics) {
+    h.push_str(&format!(
+        "<p class=\"verdict {}\">{}</p>",
+        if m.pass { "ok" } else { "no" },
+        if m.pass {
+            "The simulated milled surface meets every tolerance against the target.".to_string()
+        } else {
+            format!(
+                "The simulated milled surface falls short: {}.",
+                failed(&m.milled.checks).join("; ")
+            )
+        }
+    ));
+    notes(h, &m.notes);
+    h.push_str(&format!("<h2>Metrics</h2><p>Reference: {}.</p>", esc(&m.reference)));
+    h.push_str(&metrics_table(&m.design, &m.milled));
+}
+
+/// Verdict, reasons and per-region metrics of a spatially varying target.
+fn regions(h: &mut String, m: &super::RegionsMetrics) {
+    let short: Vec<String> = m
+        .regions
+        .iter()
+        .filter(|r| !r.pass)
+        .map(|r| format!("region `{}`: {}", r.name, failed(&r.milled.checks).join("; ")))
+        .collect();
+    h.push_str(&format!(
+        "<p class=\"verdict {}\">{}</p>",
+        if m.pass { "ok" } else { "no" },
+        if m.pass {
+            format!(
+                "Every region of the simulated milled part ({}) meets every tolerance against its own target.",
+                m.regions
+                    .iter()
+                    .map(|r| format!("`{}`", r.name))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            )
+        } else {
+            format!("The simulated milled part falls short: {}.", short.join("; "))
+        }
+    ));
+    notes(h, &m.notes);
+    h.push_str("<h2>Regions</h2><table class=\"metrics\"><tr><th>region</th><th>colour</th><th>target</th><th>share</th><th>border</th><th>measured</th></tr>");
+    for r in &m.regions {
+        h.push_str(&format!(
+            "<tr><td>{}</td><td><span style=\"display:inline-block;width:1em;height:1em;border:1px solid #888;background:{}\"></span> {}</td><td>{}</td><td>{:.0}%</td><td>{:.2} mm</td><td>{:.1} mm² (at least {:.2} mm from other regions)</td></tr>",
+            esc(&r.name),
+            esc(&r.color),
+            esc(&r.color),
+            esc(&r.target),
+            r.area_fraction * 100.0,
+            r.border_mm,
+            r.measured_mm2,
+            r.excluded_mm
+        ));
+    }
+    h.push_str("</table>");
+    for r in &m.regions {
+        h.push_str(&format!(
+            "<h2>Metrics: region `{}`</h2><p>Reference: the observed half-angle distribution of `{}`; the design is its own tile's facets convolved with the base lobe, the milled figures come from the region's cells away from its border.</p>",
+            esc(&r.name),
+            esc(&r.target)
+        ));
+        h.push_str(&metrics_table(&r.design, &r.milled));
+    }
+}

@@ -1,0 +1,553 @@
+//! The verification stage's entry point: the target against the design tile and the simulated milled
+//! surface, the wave optics of a milled patch, the diffraction check, and the figures of the report.
+//!
+//! `job` calls [`run`] with the products of the stages before it; everything verification decides (which
+//! lobes are applied to what, the metrics and their verdict, the explanations, the optical constants of the
+//! wave check) lives here, so the job runner only sequences stages and writes files.
+
+use super::milled::{self, Measurement};
+use super::report::Figure;
+use super::{explain, highlight, metrics, render, Metrics, Tolerances};
+use crate::base::geometry::Vec3;
+use crate::base::plot::Canvas;
+use crate::base::slope::{SlopeDomain, SlopeGrid};
+use crate::base::surface;
+use crate::stages::brdf::Brdf;
+use crate::stages::facets::Tile;
+use crate::stages::ndf::{self, Kernel, Ndf, NdfConfig};
+use crate::stages::optics::{geometric, wave};
+use crate::stages::simulate::{Deviation, Simulation};
+use serde::{Deserialize, Serialize};
+
+/// `[verify]` of a job: what is measured and the optics of the wave check. Angles in degrees, lengths in
+/// the unit their name gives.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct VerifyConfig {
+    /// Incident angles of the BRDF slices and albedos, degrees, each in [0, 90).
+    pub incident_deg: Vec<f64>,
+    /// Gaussian pre-filter of the milled heights before their slopes are taken, σ in µm (0: none).
+    pub prefilter_um: f64,
+    /// Wavelength of the wave-optics check, µm.
+    pub wavelength_um: f64,
+    /// Standard deviation σ of the Gaussian coherence area of the wave-optics check, µm.
+    pub coherence_sigma_um: f64,
+    /// Side of the square patch of the milled surface the wave optics evaluate, mm.
+    pub wave_patch_mm: f64,
+    /// Tolerances of the verdict.
+    pub tolerances: Tolerances,
+}
+
+impl Default for VerifyConfig {
+    fn default() -> Self {
+        Self {
+            incident_deg: vec![0.0, 30.0, 60.0],
+            prefilter_um: 0.0,
+            wavelength_um: 0.55,
+            coherence_sigma_um: 10.0,
+            wave_patch_mm: 0.4,
+            tolerances: Tolerances::default(),
+        }
+    }
+}
+
+impl VerifyConfig {
+    /// Check every field; the error names it.
+    pub fn validate(&self) -> Result<(), VerifyError> {
+        let bad = |field: &'static str, message: String| Err(VerifyError::Config { field, message });
+        if self.incident_deg.is_empty() || self.incident_deg.iter().any(|t| !(0.0..90.0).contains(t)) {
+            return bad("incident_deg", "must list angles in [0, 90)".into());
+        }
+        if !(self.prefilter_um.is_finite() && self.prefilter_um >= 0.0) {
+            return bad("prefilter_um", format!("must be ≥ 0, got {}", self.prefilter_um));
+        }
+        for (field, v, lo, hi) in [
+            ("wavelength_um", self.wavelength_um, 0.1, 20.0),
+            ("coherence_sigma_um", self.coherence_sigma_um, 0.5, 200.0),
+            ("wave_patch_mm", self.wave_patch_mm, 0.01, 5.0),
+        ] {
+            if !(v >= lo && v <= hi) {
+                return bad(field, format!("must be in [{lo}, {hi}], got {v}"));
+            }
+        }
+        self.tolerances.validate().map_err(|e| VerifyError::Config {
+            field: "tolerances",
+            message: e.to_string(),
+        })
+    }
+}
+
+/// Verification could not be done.
+#[derive(Debug, thiserror::Error)]
+pub enum VerifyError {
+    /// A `[verify]` setting is out of range.
+    #[error("`verify.{field}` {message}")]
+    Config {
+        /// The field.
+        field: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+    /// A lobe could not be tabulated.
+    #[error(transparent)]
+    Ndf(#[from] ndf::NdfError),
+    /// The wave optics failed.
+    #[error(transparent)]
+    Wave(#[from] wave::WaveError),
+    /// The milled surface is too small to evaluate.
+    #[error("the milled surface is too small for a {side_mm} mm wave-optics patch inside its {margin}-cell edge band")]
+    TooSmall {
+        /// The patch side asked for, mm.
+        side_mm: f64,
+        /// The edge band, cells.
+        margin: usize,
+    },
+    /// A region of a spatially varying target cannot be measured.
+    #[error("{0}")]
+    Region(String),
+}
+
+/// What verification compares: the products of the stages before it.
+pub struct VerifyInput<'a> {
+    /// The target BRDF.
+    pub target: &'a Brdf,
+    /// The NDF stage's result (its observed distribution is the reference).
+    pub ndf: &'a Ndf,
+    /// The NDF stage's settings (the grid the lobes are tabulated on).
+    pub ndf_config: &'a NdfConfig,
+    /// The base lobe the NDF stage deconvolved, if any (the design tile is convolved with it).
+    pub base: Option<&'a Kernel>,
+    /// The material's polish lobe, applied to the milled surface when the base lobe is the scallop lobe
+    /// (the simulation models the scallops but not the polish).
+    pub polish: Option<&'a Brdf>,
+    /// The base lobe is the finishing raster's scallop lobe.
+    pub base_is_scallop: bool,
+    /// The design tile.
+    pub tile: &'a Tile,
+    /// The simulated cut.
+    pub sim: &'a Simulation,
+    /// Its deviation from the design.
+    pub deviation: &'a Deviation,
+    /// Finishing tool radius, mm.
+    pub tool_radius_mm: f64,
+    /// Finishing stepover, mm.
+    pub stepover_mm: f64,
+    /// Angle of the finishing passes from x, degrees.
+    pub raster_angle_deg: f64,
+    /// The machinable cone: the steepest facet the design allows, degrees (slope variances are compared
+    /// within it).
+    pub cone_deg: f64,
+    /// The design loop's rounds, for `metrics.json` and the convergence figure.
+    pub rounds: &'a [crate::stages::design::Round],
+    /// The candidate arrangements' first rounds.
+    pub arrangements: &'a [crate::stages::design::Round],
+}
+
+/// What verification produced.
+pub struct VerifyOutput {
+    /// `metrics.json`.
+    pub metrics: Metrics,
+    /// The design tile's NDF (⊛ the base lobe).
+    pub design: SlopeGrid,
+    /// The milled surface's NDF (⊛ the polish lobe).
+    pub milled: SlopeGrid,
+    /// `wave.png`: the wave and geometric BRDF of a milled patch.
+    pub wave_png: Canvas,
+    /// The report's figures of this stage, in order (NDFs, BRDF slices, rendered preview, wave optics).
+    pub figures: Vec<Figure>,
+}
+
+/// Verify: measure the design tile and the milled surface against the target's observed distribution,
+/// explain any shortfall, check the wave optics of a milled patch, and draw the figures.
+pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, VerifyError> {
+    cfg.validate()?;
+    let n = input.ndf;
+    let domain = n.config.domain();
+    let tol = cfg.tolerances;
+    let design = design_ndf(input.tile, input.base, domain);
+    let (milled, outside, measurement) = milled_ndf(cfg, input)?;
+    let cone_tan = input.cone_deg.to_radians().tan();
+    let mut design_m = metrics::measure(&n.observed, &design, input.target, &cfg.incident_deg, &tol, cone_tan);
+    let mut milled_m = metrics::measure(&n.observed, &milled, input.target, &cfg.incident_deg, &tol, cone_tan);
+    let highlight = input
+        .target
+        .highlight()
+        .map(|h| highlight::compare(h, n, &design, &milled, &mut design_m, &mut milled_m, &tol));
+    let facets = input.tile.config.facets_x * input.tile.config.facets_y;
+    let mut notes = explain::shortfall(&explain::Findings {
+        milled: &milled_m,
+        design: &design_m,
+        deviation: input.deviation,
+        tolerances: &tol,
+        tool_radius_mm: input.tool_radius_mm,
+        stepover_mm: input.stepover_mm,
+        outside_grid: outside,
+        facets,
+        scale: input
+            .rounds
+            .iter()
+            .min_by(|a, b| a.score.total_cmp(&b.score))
+            .map(|r| r.scale)
+            .unwrap_or([1.0, 1.0]),
+        // a drawn highlight has no single peak to compare the scallops' lobe with (its check is the image's)
+        target_peak_halfwidth: if highlight.is_some() {
+            0.0
+        } else {
+            let across = (input.raster_angle_deg + 90.0).to_radians();
+            explain::half_max_extent(&n.observed, (across.cos(), across.sin()))
+        },
+    });
+    if let Some(h) = highlight
+        .as_ref()
+        .map(|h| &h.metrics)
+        .filter(|h| h.milled_corr < tol.highlight_corr_min)
+    {
+        notes.push(highlight::why(h, &tol));
+    }
+    if let Some(note) = highlight.as_ref().and_then(|h| h.note.clone()) {
+        notes.push(note);
+    }
+    if let Some(w) = crate::stages::ndf::grid_warning(input.ndf) {
+        notes.push(format!("{w}."));
+    }
+    if input.tile.sampling.steep_mass > 1e-4 {
+        notes.push(format!(
+            "{:.2}% of the target NDF's mass lies beyond the machinable limit of {}° and was dropped from the facets.",
+            input.tile.sampling.steep_mass * 100.0,
+            input.tile.config.max_slope_deg
+        ));
+    }
+    if !measurement.window.whole() {
+        notes.push(format!(
+            "The milled NDF is measured over the whole interior ({:.2} × {:.2} mm), which is not a whole number of tiles: the work area needs to be at least a tile ({} × {} mm) plus {:.2} mm on each side for the window to hold whole tiles, so the facets inside it are not weighted equally.",
+            measurement.window.size_mm[0],
+            measurement.window.size_mm[1],
+            input.tile.config.facets_x as f64 * input.tile.config.facet_mm,
+            input.tile.config.facets_y as f64 * input.tile.config.facet_mm,
+            measurement.margin_mm
+        ));
+    }
+    let (wave_png, wave_albedo) = wave_patch(cfg, input, measurement.margin_cells)?;
+    let o_std = n.observed_stats.cov[0][0].max(n.observed_stats.cov[1][1]).sqrt();
+    let diffraction = wave::diffraction_warning(
+        input.stepover_mm,
+        cfg.wavelength_um,
+        (2.0 * o_std).atan(),
+        cfg.coherence_sigma_um,
+    );
+    if let Some(w) = &diffraction {
+        notes.push(format!("Diffraction: {w}"));
+    }
+    let reference = format!(
+        "the observed half-angle distribution O of `{}`; the design is convolved with the base lobe `{}`, the milled surface (slopes averaged over one stepover across the passes) with the scallop lobe `{}`",
+        n.brdf_spec,
+        n.base_spec.as_deref().unwrap_or("none"),
+        measurement.scallops
+    );
+    let metrics = Metrics {
+        version: 1,
+        pass: milled_m.pass,
+        design: design_m,
+        milled: milled_m,
+        tolerances: tol,
+        reference,
+        notes,
+        diffraction,
+        measurement: Some(measurement),
+        rounds: input.rounds.to_vec(),
+        arrangements: input.arrangements.to_vec(),
+        highlight_corr: highlight.as_ref().map(|h| h.metrics.milled_corr),
+        highlight: highlight.as_ref().map(|h| h.metrics.clone()),
+    };
+    let mut figures = figures(
+        cfg,
+        input,
+        &design,
+        &milled,
+        &wave_png,
+        wave_albedo,
+        metrics.diffraction.is_some(),
+    );
+    if let Some(h) = highlight {
+        figures.insert(0, h.figure);
+    }
+    if !input.rounds.is_empty() {
+        figures.insert(0, convergence(input.rounds, input.arrangements, &metrics, &tol));
+    }
+    Ok(VerifyOutput {
+        metrics,
+        design,
+        milled,
+        wave_png,
+        figures,
+    })
+}
+
+/// The band of the simulated stock left out of the milled NDF, cells: one tool radius grazed, one cut from
+/// one side only, a design sample either side, and the half stepover the slope mean reaches.
+fn milled_margin(input: &VerifyInput) -> usize {
+    let r = input.tool_radius_mm;
+    let p = input.sim.heightfield.pitch_mm;
+    ((2.0 * r + 2.0 * input.tile.heightfield.pitch_mm) / p).ceil() as usize + milled::reach_cells(p, input.stepover_mm)
+}
+
+/// The milled surface's NDF as `milled` describes: whole tiles, slopes averaged over a stepover, the
+/// scallop lobe (with the polish) convolved back. Returns the NDF, the fraction of slopes beyond the grid,
+/// and how it was measured.
+fn milled_ndf(cfg: &VerifyConfig, input: &VerifyInput) -> Result<(SlopeGrid, f64, Measurement), VerifyError> {
+    let n = input.ndf;
+    let domain = n.config.domain();
+    let margin = milled_margin(input);
+    let hf = &input.sim.heightfield;
+    let c = &input.tile.config;
+    let tile_mm = [c.facets_x as f64 * c.facet_mm, c.facets_y as f64 * c.facet_mm];
+    let win = milled::window(hf, margin, tile_mm).ok_or(VerifyError::TooSmall {
+        side_mm: cfg.wave_patch_mm,
+        margin,
+    })?;
+    let mut slopes = milled::slopes(hf, &win, input.raster_angle_deg, input.stepover_mm);
+    if cfg.prefilter_um > 0.0 {
+        // the pre-filter is a Gaussian of the heights; the stepover mean already smooths below a stepover
+        let f = surface::gaussian(hf, cfg.prefilter_um * 1e-3);
+        slopes = milled::slopes(&f, &win, input.raster_angle_deg, input.stepover_mm);
+    }
+    let (raw, outside) = surface::ndf_of_slopes(&slopes, domain);
+    let lobe = match input.base {
+        Some(k) if input.base_is_scallop => k.clone(),
+        _ => Kernel::scallop(
+            &domain,
+            input.tool_radius_mm,
+            input.stepover_mm,
+            input.raster_angle_deg,
+            input.polish,
+            input.ndf_config,
+        )?,
+    };
+    let milled = normalised(lobe.convolve(&raw));
+    let cone_tan = input.cone_deg.to_radians().tan();
+    let beyond = 1.0 - n.observed.cut_to_cone(cone_tan).mass() / n.observed.mass().max(1e-300);
+    let measurement = Measurement {
+        window: win,
+        margin_cells: margin,
+        margin_mm: margin as f64 * hf.pitch_mm,
+        scallops: lobe.label.clone(),
+        cone_deg: input.cone_deg,
+        target_mass_beyond_cone: beyond,
+        outside_grid: outside,
+    };
+    Ok((milled, outside, measurement))
+}
+
+/// The design loop's convergence: each round's as-milled model variance ratios, the tolerance band, and the
+/// simulated cut's ratios at the chosen round.
+fn convergence(
+    rounds: &[crate::stages::design::Round],
+    arrangements: &[crate::stages::design::Round],
+    metrics: &Metrics,
+    tol: &Tolerances,
+) -> Figure {
+    use crate::base::plot::{LinePlot, Series, PALETTE};
+    let n = rounds.len() as f64;
+    // percent off the target's variance, so the band and the rounds share a readable scale
+    let pct = |v: f64| (v - 1.0) * 100.0;
+    let pts = |k: usize| {
+        rounds
+            .iter()
+            .map(|r| (r.round as f64, pct(r.cov_ratio[k])))
+            .collect::<Vec<_>>()
+    };
+    let band = |v: f64| vec![(0.8, pct(v)), (n + 0.2, pct(v))];
+    let chosen = rounds
+        .iter()
+        .min_by(|a, b| a.score.total_cmp(&b.score))
+        .map(|r| r.round as f64)
+        .unwrap_or(1.0);
+    let mark = |v: f64| vec![(chosen - 0.15, pct(v)), (chosen + 0.15, pct(v))];
+    let plot = LinePlot {
+        title: "design rounds: variance off the target (%)".into(),
+        x_label: "round".into(),
+        y_label: "%".into(),
+        series: vec![
+            Series {
+                label: "model x".into(),
+                points: pts(0),
+                color: PALETTE[0],
+                dashed: false,
+            },
+            Series {
+                label: "model y".into(),
+                points: pts(1),
+                color: PALETTE[1],
+                dashed: false,
+            },
+            Series {
+                label: "milled x (G-code)".into(),
+                points: mark(metrics.milled.cov_ratio[0]),
+                color: PALETTE[0],
+                dashed: true,
+            },
+            Series {
+                label: "milled y (G-code)".into(),
+                points: mark(metrics.milled.cov_ratio[1]),
+                color: PALETTE[1],
+                dashed: true,
+            },
+            Series {
+                label: "tolerance".into(),
+                points: band(tol.cov_ratio[0]),
+                color: [120, 120, 120],
+                dashed: true,
+            },
+            Series {
+                label: String::new(),
+                points: band(tol.cov_ratio[1]),
+                color: [120, 120, 120],
+                dashed: true,
+            },
+        ],
+        size_px: (460, 260),
+        log_y: false,
+        whole_x: true,
+    };
+    let rows: Vec<String> = rounds
+        .iter()
+        .map(|r| {
+            format!(
+                "round {}: slopes ×[{:.3}, {:.3}], model corr {:.4}, L1 {:.3}, variance [{:.3}, {:.3}], relief {:.3} mm, steps {:.1} µm rms",
+                r.round, r.scale[0], r.scale[1], r.ndf_corr, r.ndf_l1, r.cov_ratio[0], r.cov_ratio[1], r.relief_mm, r.rms_step_um
+            )
+        })
+        .collect();
+    let candidates = if arrangements.len() > 1 {
+        let list: Vec<String> = arrangements
+            .iter()
+            .map(|r| format!("seed {} [{:.3}, {:.3}]", r.seed, r.cov_ratio[0], r.cov_ratio[1]))
+            .collect();
+        format!(
+            " Round 1 is the best of {} arrangements of the same facets, each modelled uncorrected (variance ratios: {}).",
+            arrangements.len(),
+            list.join(", ")
+        )
+    } else {
+        String::new()
+    };
+    Figure::new(
+        "Design rounds",
+        format!(
+            "Each round models what the ball leaves of the tile (its opening of the periodic tile, convolved with the scallop lobe) and scales the facet slopes so the model's variance meets the target's.{candidates} The short dashed marks are the simulated G-code of the chosen round (round {chosen}), the grey dashed lines the tolerance band. {}.",
+            rows.join("; ")
+        ),
+        &plot.render(),
+    )
+}
+
+/// The report's figures of the verification stage.
+fn figures(
+    cfg: &VerifyConfig,
+    input: &VerifyInput,
+    design: &SlopeGrid,
+    milled: &SlopeGrid,
+    wave_png: &Canvas,
+    wave_albedo: f64,
+    diffracts: bool,
+) -> Vec<Figure> {
+    let material = input.target.material;
+    let ndf_row = Canvas::hstack(&[
+        ndf::render_png(&input.ndf.observed, "target: observed O"),
+        ndf::render_png(design, "design tile * base lobe"),
+        ndf::render_png(milled, "milled (simulated)"),
+    ]);
+    let design_brdf = geometric::MicrofacetBrdf::new(design.clone(), material);
+    let milled_brdf = geometric::MicrofacetBrdf::new(milled.clone(), material);
+    let tf = |a: &Vec3, b: &Vec3| input.target.eval(a, b);
+    let df = |a: &Vec3, b: &Vec3| design_brdf.eval(a, b);
+    let mf = |a: &Vec3, b: &Vec3| milled_brdf.eval(a, b);
+    let items: [(&str, render::BrdfFn); 3] = [("target", &tf), ("design tile", &df), ("milled", &mf)];
+    let slices = render::slices(&items, &cfg.incident_deg);
+    let spheres = render::sphere_row(&items, 260, 1.0);
+    vec![
+        Figure::new(
+            "NDFs",
+            "Slope densities P22 (log scale over four decades) on the target's grid: the target's observed distribution, the design tile's facets convolved with the base lobe, and the simulated milled surface.",
+            &ndf_row,
+        ),
+        Figure::new(
+            "BRDF slices",
+            "f·cosθo (luminance) in the plane of incidence for each incident angle.",
+            &slices,
+        ),
+        Figure::new(
+            "Rendered preview",
+            "Spheres of the target material and of the fabricated surfaces' microfacet BRDFs under the same two lights (orthographic view, raster direction horizontal).",
+            &spheres,
+        ),
+        Figure::new(
+            "Wave optics of the milled surface",
+            format!(
+                "Kirchhoff BRDF (FFT, λ = {} µm, Gaussian coherence σ = {} µm, 3×3 windows) of a {} mm patch of the simulated surface at normal incidence, beside the geometric microfacet BRDF of the same patch, on one colour scale (four decades below the larger peak), within the disc of real outgoing directions (grey beyond). Wave albedo {wave_albedo:.3}. Scallop stepover {:.1} µm: {}",
+                cfg.wavelength_um,
+                cfg.coherence_sigma_um,
+                cfg.wave_patch_mm,
+                input.stepover_mm * 1000.0,
+                if diffracts { "its diffraction orders fall inside the lobe (see Why)." } else { "no resolved diffraction orders inside the lobe." }
+            ),
+            wave_png,
+        ),
+    ]
+}
+
+/// The wave and geometric BRDFs of a square patch at the centre of the milled surface's interior; returns
+/// the figure and the wave albedo.
+fn wave_patch(cfg: &VerifyConfig, input: &VerifyInput, margin: usize) -> Result<(Canvas, f64), VerifyError> {
+    let hf = &input.sim.heightfield;
+    let p = hf.pitch_mm;
+    let side = ((cfg.wave_patch_mm / p).round() as usize)
+        .min(hf.nx.saturating_sub(2 * margin))
+        .min(hf.ny.saturating_sub(2 * margin));
+    if side < 16 {
+        return Err(VerifyError::TooSmall {
+            side_mm: cfg.wave_patch_mm,
+            margin,
+        });
+    }
+    let (i0, j0) = ((hf.nx - side) / 2, (hf.ny - side) / 2);
+    let mut patch = crate::base::heightfield::Heightfield::flat(side, side, p, false, 0.0);
+    for j in 0..side {
+        for i in 0..side {
+            patch.z_mm[j * side + i] = hf.at(i0 + i, j0 + j);
+        }
+    }
+    let material = input.target.material;
+    let max_slope = input.tile.config.max_slope_deg.to_radians().tan();
+    let (geo_ndf, _) = surface::ndf(&patch, SlopeDomain::square(129, 1.2 * max_slope), 0.0, 1);
+    let geo = geometric::MicrofacetBrdf::new(geo_ndf, material);
+    let surf = wave::OpticalSurface::new(&patch)?;
+    let wcfg = wave::WaveConfig {
+        wavelength_um: cfg.wavelength_um,
+        sigma_um: cfg.coherence_sigma_um,
+        material,
+        ..Default::default()
+    };
+    let wi = Vec3::z();
+    let slice = wave::fft_slice(&surf, &wi, &wcfg)?;
+    Ok((
+        crate::stages::optics::figures::wave_vs_geometric_png(&slice, &geo, &wi, max_slope),
+        slice.albedo(),
+    ))
+}
+
+/// The design tile's NDF: its facets' slopes (each facet's area alike) convolved with the base lobe.
+pub(super) fn design_ndf(tile: &Tile, base: Option<&Kernel>, domain: crate::base::slope::SlopeDomain) -> SlopeGrid {
+    let a = &tile.arrangement;
+    let facet_slopes: Vec<(f64, f64)> = a.p.iter().copied().zip(a.q.iter().copied()).collect();
+    let (raw, _) = surface::ndf_of_slopes(&facet_slopes, domain);
+    match base {
+        Some(k) => normalised(k.convolve(&raw)),
+        None => raw,
+    }
+}
+
+fn normalised(mut g: SlopeGrid) -> SlopeGrid {
+    g.normalise();
+    g
+}
