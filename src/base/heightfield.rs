@@ -3,6 +3,7 @@
 //! whether it is periodic (tileable). The stock top is z = 0 and cuts go to negative z.
 
 use crate::base::plot::{viridis, Heatmap, Scale};
+use crate::base::Invalid;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
@@ -52,27 +53,27 @@ impl Heightfield {
     }
 
     /// Check the invariants: sizes, a positive finite pitch, finite heights.
-    pub fn check_invariants(&self) -> Result<(), String> {
+    pub fn check_invariants(&self) -> Result<(), Invalid> {
         if self.nx == 0 || self.ny == 0 {
-            return Err(format!("heightfield is empty ({}×{})", self.nx, self.ny));
+            return Err(Invalid(format!("heightfield is empty ({}×{})", self.nx, self.ny)));
         }
         if self.nx.checked_mul(self.ny) != Some(self.z_mm.len()) {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "{} heights for a {}×{} grid",
                 self.z_mm.len(),
                 self.nx,
                 self.ny
-            ));
+            )));
         }
         if !(self.pitch_mm.is_finite() && self.pitch_mm > 0.0) {
-            return Err(format!("pitch_mm must be positive, got {}", self.pitch_mm));
+            return Err(Invalid(format!("pitch_mm must be positive, got {}", self.pitch_mm)));
         }
         if let Some(k) = self.z_mm.iter().position(|v| !v.is_finite()) {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "height {k} (x {}, y {}) is not finite",
                 k % self.nx,
                 k / self.nx
-            ));
+            )));
         }
         Ok(())
     }

@@ -1,6 +1,7 @@
 //! PNG images read as input (a drawn highlight, an svBRDF label map): one decoder with the checks every
 //! reader of a user's image needs — the signature, a size cap, a single frame — before any pixel is used.
 
+use crate::base::Invalid;
 /// The longest side accepted, pixels (a bound on the work before it starts).
 pub const MAX_SIDE_PX: u32 = 4096;
 
@@ -36,32 +37,34 @@ impl Image8 {
 
 /// Decode a PNG (8-bit or 16-bit, any colour type; palettes expanded, 16 bits stripped to 8). Refuses what
 /// is not a PNG, a truncated or corrupt one, one larger than [`MAX_SIDE_PX`] per side, and an animated one.
-pub fn decode_png(bytes: &[u8]) -> Result<Image8, String> {
+pub fn decode_png(bytes: &[u8]) -> Result<Image8, Invalid> {
     if !bytes.starts_with(&[0x89, b'P', b'N', b'G', 0x0d, 0x0a, 0x1a, 0x0a]) {
-        return Err("not a PNG image (it does not start with the PNG signature)".into());
+        return Err(Invalid(
+            "not a PNG image (it does not start with the PNG signature)".into(),
+        ));
     }
     let mut decoder = png::Decoder::new(std::io::Cursor::new(bytes));
     decoder.set_transformations(png::Transformations::EXPAND | png::Transformations::STRIP_16);
     let mut reader = decoder.read_info().map_err(|e| format!("not a readable PNG: {e}"))?;
     let (w, h) = (reader.info().width, reader.info().height);
     if w > MAX_SIDE_PX || h > MAX_SIDE_PX {
-        return Err(format!(
+        return Err(Invalid(format!(
             "the image is {w} × {h} pixels; at most {MAX_SIDE_PX} per side is accepted"
-        ));
+        )));
     }
     let mut buf = vec![0u8; reader.output_buffer_size()];
     let frame = reader
         .next_frame(&mut buf)
         .map_err(|e| format!("the PNG's image data cannot be decoded: {e}"))?;
     if (frame.width, frame.height) != (w, h) {
-        return Err(format!(
+        return Err(Invalid(format!(
             "an animated PNG (its first frame is {} × {} of {w} × {h}): give a single image",
             frame.width, frame.height
-        ));
+        )));
     }
     let channels = frame.color_type.samples();
     if !(1..=4).contains(&channels) {
-        return Err(format!("unexpected {channels} samples per pixel"));
+        return Err(Invalid(format!("unexpected {channels} samples per pixel")));
     }
     let (w, h) = (w as usize, h as usize);
     let line = frame.line_size;

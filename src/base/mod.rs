@@ -15,3 +15,29 @@ pub mod slope;
 pub mod stl;
 pub mod surface;
 pub mod x3p;
+
+/// A value that breaks its type's invariants, or input that is not what a reader expects, and why (the
+/// caller adds the file or field it came from).
+#[derive(Clone, Debug, PartialEq, Eq, thiserror::Error)]
+#[error("{0}")]
+pub struct Invalid(pub String);
+
+impl From<String> for Invalid {
+    fn from(s: String) -> Self {
+        Invalid(s)
+    }
+}
+
+impl From<&str> for Invalid {
+    fn from(s: &str) -> Self {
+        Invalid(s.to_string())
+    }
+}
+
+impl std::ops::Deref for Invalid {
+    type Target = str;
+    /// The reason, as text.
+    fn deref(&self) -> &str {
+        &self.0
+    }
+}

@@ -6,6 +6,7 @@
 //! A [`SlopeGrid`] samples `P22` at the centres of a regular grid of cells; it is **not** periodic.
 
 use crate::base::geometry::{cos_sin_phi, Vec3};
+use crate::base::Invalid;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -88,21 +89,21 @@ impl SlopeDomain {
     }
 
     /// Check that the domain is usable: at least 2 × 2 cells, finite and increasing bounds.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Invalid> {
         if self.nx < 2 || self.ny < 2 {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "grid must have at least 2×2 cells, got {}×{}",
                 self.nx, self.ny
-            ));
+            )));
         }
         let finite = [self.p_min, self.p_max, self.q_min, self.q_max]
             .iter()
             .all(|v| v.is_finite());
         if !finite || self.p_max <= self.p_min || self.q_max <= self.q_min {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "slope bounds must be finite with min < max, got p [{}, {}], q [{}, {}]",
                 self.p_min, self.p_max, self.q_min, self.q_max
-            ));
+            )));
         }
         Ok(())
     }
@@ -152,22 +153,22 @@ impl SlopeGrid {
     }
 
     /// Check the invariants every stage relies on: the right length, finite and non-negative values.
-    pub fn check_invariants(&self) -> Result<(), String> {
+    pub fn check_invariants(&self) -> Result<(), Invalid> {
         self.domain.validate()?;
         if self.density.len() != self.domain.len() {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "density has {} values, expected nx·ny = {}",
                 self.density.len(),
                 self.domain.len()
-            ));
+            )));
         }
         if let Some(k) = self.density.iter().position(|v| !v.is_finite() || *v < 0.0) {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "density[{k}] = {} (cell p index {}, q index {}) is not a finite non-negative number",
                 self.density[k],
                 k % self.domain.nx,
                 k / self.domain.nx
-            ));
+            )));
         }
         Ok(())
     }

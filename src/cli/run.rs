@@ -45,9 +45,6 @@ pub fn run(a: &Args) -> Result<i32> {
     std::fs::create_dir_all(&a.out)
         .map_err(|e| anyhow::anyhow!("--out {}: cannot create the folder: {e}", a.out.display()))?;
     println!("job       {} ({})", ready.job.name, a.job.display());
-    for p in &ready.prepared {
-        println!("input     {p}");
-    }
     let style = ProgressStyle::with_template("{spinner} {prefix:>9}  {msg} {elapsed}").unwrap();
     let mut bar: Option<ProgressBar> = None;
     let mut progress = |event: Progress| match event {
@@ -88,6 +85,7 @@ pub fn run(a: &Args) -> Result<i32> {
             b.enable_steady_tick(Duration::from_millis(120));
             bar = Some(b);
         }
+        Progress::Prepared(what) => println!("input     {what}"),
         Progress::Region(name) => {
             let line = format!("   region `{name}`");
             match &bar {

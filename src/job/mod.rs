@@ -22,17 +22,18 @@
 //! [verify]     # VerifyConfig: incident_deg, prefilter_um, wavelength_um, coherence_sigma_um, wave_patch_mm, [verify.tolerances]
 //! ```
 //!
-//! Unknown keys are refused with their line; the machine profile, the tool and the combination of
-//! parameters are checked before any work starts ([`Job::load`]).
+//! Unknown keys are refused with their line. Loading ([`Job::load`]) only parses the file, applies the
+//! overrides and composes the stages' checked plans — each stage checks its own section once, and its
+//! refusal names the job's key; it writes nothing. [`run`] sequences the stages and writes the artifacts.
 
 use crate::cut::machine::Machine;
-use crate::cut::tool::Shape;
 use crate::stages::brdf::Brdf;
 use crate::stages::design::DesignConfig;
 use crate::stages::facets::FacetsConfig;
 use crate::stages::ndf::NdfConfig;
+use crate::stages::simulate::SimulateConfig;
 use crate::stages::svbrdf::{Labels, SvbrdfSection};
-use crate::stages::toolpath::ToolpathConfig;
+use crate::stages::toolpath::{ToolpathConfig, ToolpathPlan};
 use crate::stages::verify::VerifyConfig;
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -115,6 +116,24 @@ impl Default for SimulateSection {
     }
 }
 
+impl SimulateSection {
+    /// The simulation of the program `plan` makes: its finishing ball (and every tool of the machine swept with
+    /// its own shape), on this section's grid and arc tolerance, with the machine's limits and dialect.
+    #[must_use]
+    pub fn config(&self, plan: &ToolpathPlan) -> SimulateConfig {
+        SimulateConfig {
+            tool: crate::cut::tool::Shape::Ball {
+                diameter_mm: plan.tool.diameter_mm(),
+            },
+            tools: crate::stages::simulate::tool_table(&plan.machine),
+            pitch_um: self.pitch_um,
+            arc_tolerance_um: self.arc_tolerance_um,
+            machine: Some(plan.machine.clone()),
+            ..Default::default()
+        }
+    }
+}
+
 /// A job file.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -163,51 +182,83 @@ pub enum JobError {
         reason: String,
     },
     /// A stage failed.
-    #[error("{stage}: {message}")]
+    #[error("{stage}: {source}")]
     Stage {
         /// Which stage.
         stage: &'static str,
         /// Its error.
-        message: String,
+        #[source]
+        source: StageError,
     },
     /// An output could not be written.
     #[error(transparent)]
     Write(#[from] crate::base::io::WriteError),
 }
 
-/// One region of a spatially varying target, ready to run.
-#[derive(Clone, Debug)]
-pub struct RegionTarget {
-    /// Its name (files `ndf-NAME.json`, `tile-NAME.*`).
-    pub name: String,
-    /// Its label colour.
-    pub color: [u8; 3],
-    /// The target spec as resolved.
-    pub spec: String,
-    /// The target.
-    pub target: Brdf,
+/// The error of a stage, kept as the source of [`JobError::Stage`].
+#[derive(Debug, thiserror::Error)]
+pub enum StageError {
+    /// A target or base BRDF.
+    #[error(transparent)]
+    Brdf(#[from] crate::stages::brdf::BrdfError),
+    /// The NDF stage.
+    #[error(transparent)]
+    Ndf(#[from] crate::stages::ndf::NdfError),
+    /// The design loop.
+    #[error(transparent)]
+    Design(#[from] crate::stages::design::DesignError),
+    /// Composing a spatially varying part.
+    #[error(transparent)]
+    Svbrdf(#[from] crate::stages::svbrdf::SvbrdfError),
+    /// The toolpath stage.
+    #[error(transparent)]
+    Toolpath(#[from] crate::stages::toolpath::ToolpathError),
+    /// The simulation.
+    #[error(transparent)]
+    Simulate(#[from] crate::stages::simulate::SimulateError),
+    /// The verification.
+    #[error(transparent)]
+    Verify(#[from] crate::stages::verify::VerifyError),
+    /// An input the run prepares (a MERL file written from `target.merl_from`).
+    #[error("{0}")]
+    Input(String),
+    /// An artifact that could not be serialised.
+    #[error(transparent)]
+    Json(#[from] serde_json::Error),
 }
 
-/// A job checked and ready to run: the parsed inputs it needs.
+pub use targets::{MerlFrom, RegionTarget};
+
+/// A job checked and ready to run: the parsed job and the stages' plans composed from it.
 pub struct Ready {
     /// The job.
     pub job: Job,
     /// The job file's folder.
     pub dir: PathBuf,
-    /// The target BRDF (with `[svbrdf]`, the first region's).
-    pub target: Brdf,
-    /// With `[svbrdf]`: each region's target, in the order of `[[svbrdf.region]]`.
-    pub regions: Vec<RegionTarget>,
+    /// The targets: the job's one target (named `""`) or, with `[svbrdf]`, each region's in the order of
+    /// `[[svbrdf.region]]`.
+    pub targets: Vec<RegionTarget>,
     /// With `[svbrdf]`: the label image, read and checked against the regions.
     pub labels: Option<Labels>,
     /// The machine.
     pub machine: Machine,
     /// Path of the machine profile.
     pub machine_path: PathBuf,
+    /// The toolpath stage's plan: the tools, the stepover, the feed and the strategy, checked.
+    pub toolpath: ToolpathPlan,
     /// Where the steepest facet (`facets.max_slope_deg`) came from: `"job"` or the finishing tool.
     pub slope_cap_from: String,
-    /// Inputs the load prepared (a MERL file written from `target.merl_from`), for the user to be told.
-    pub prepared: Vec<String>,
+    /// A MERL file the run writes first (`target.merl_from` naming a file that does not exist); until then
+    /// the target is the model it is written from.
+    pub merl: Option<MerlFrom>,
+}
+
+impl Ready {
+    /// The target (with `[svbrdf]`, the first region's).
+    #[must_use]
+    pub fn target(&self) -> &Brdf {
+        &self.targets[0].target
+    }
 }
 
 impl Job {
@@ -221,7 +272,7 @@ impl Job {
         t
     }
 
-    /// Read a job file and check everything that can be checked before work starts.
+    /// Read a job file and compose the stages' plans: everything that can be checked before work starts.
     pub fn load(path: &Path) -> Result<Ready, JobError> {
         Job::load_with(path, &[])
     }
@@ -234,279 +285,148 @@ impl Job {
             path: path.display().to_string(),
             reason,
         };
-        let text = std::fs::read_to_string(path).map_err(|e| invalid(format!("cannot read the job file: {e}")))?;
-        let mut raw: toml::Value = toml::from_str(&text).map_err(|e| invalid(e.to_string()))?;
-        for o in overrides {
-            apply_override(&mut raw, o).map_err(|e| invalid(format!("--set {o}: {e}")))?;
-        }
-        match raw.get("version").and_then(|v| v.as_integer()) {
-            Some(v) if v == VERSION as i64 => {}
-            Some(v) => {
-                return Err(invalid(format!(
-                    "`version` = {v}: this build reads job files of version {VERSION}"
-                )))
-            }
-            None => return Err(invalid(format!("missing `version` (expected version = {VERSION})"))),
-        }
-        let cap_given = raw.get("facets").and_then(|f| f.get("max_slope_deg")).is_some();
-        let relief_given = raw.get("facets").and_then(|f| f.get("max_relief_mm")).is_some();
-        let mut job: Job = if overrides.is_empty() {
-            // from the text, so an error names its line and column
-            toml::from_str(&text).map_err(|e| invalid(e.to_string()))?
-        } else {
-            raw.try_into().map_err(|e: toml::de::Error| invalid(e.to_string()))?
-        };
+        let (job, given) = Job::parse(path, overrides).map_err(invalid)?;
         let dir = path
             .parent()
             .map(Path::to_path_buf)
             .unwrap_or_else(|| PathBuf::from("."));
-        let prepared: Vec<String> = make_missing_merl(&job.target, &dir)
-            .map_err(|e| invalid(format!("`target.merl_from`: {e}")))?
-            .into_iter()
-            .collect();
-        let regions = match &job.svbrdf {
-            Some(sv) => region_targets(&job.target, sv, &dir).map_err(&invalid)?,
-            None => vec![],
+        job.compose(dir, given).map_err(invalid)
+    }
+
+    /// The job file with the overrides applied, its version checked, and which of the facets' budget keys it
+    /// gives itself (the others are derived from the finishing tool).
+    fn parse(path: &Path, overrides: &[String]) -> Result<(Job, Given), String> {
+        let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read the job file: {e}"))?;
+        let mut raw: toml::Value = toml::from_str(&text).map_err(|e| e.to_string())?;
+        for o in overrides {
+            apply_override(&mut raw, o).map_err(|e| format!("--set {o}: {e}"))?;
+        }
+        match raw.get("version").and_then(|v| v.as_integer()) {
+            Some(v) if v == VERSION as i64 => {}
+            Some(v) => {
+                return Err(format!(
+                    "`version` = {v}: this build reads job files of version {VERSION}"
+                ))
+            }
+            None => return Err(format!("missing `version` (expected version = {VERSION})")),
+        }
+        let facets_key = |k: &str| raw.get("facets").and_then(|f| f.get(k)).is_some();
+        let given = Given {
+            slope_cap: facets_key("max_slope_deg"),
+            relief: facets_key("max_relief_mm"),
         };
-        let target = match regions.first() {
-            Some(r) => r.target.clone(),
+        let job: Job = if overrides.is_empty() {
+            // from the text, so an error names its line and column
+            toml::from_str(&text).map_err(|e| e.to_string())?
+        } else {
+            raw.try_into().map_err(|e: toml::de::Error| e.to_string())?
+        };
+        Ok((job, given))
+    }
+
+    /// Compose the stages' plans: the targets, the machine, the toolpath plan, the facets' budgets derived
+    /// from its finishing tool, then each remaining section's own check. A refusal names the job's key.
+    fn compose(mut self, dir: PathBuf, given: Given) -> Result<Ready, String> {
+        crate::cut::machine::program_text("name", &self.name).map_err(|e| e.to_string())?;
+        let (targets, merl) = match &self.svbrdf {
+            Some(sv) => (targets::region_targets(&self.target, sv, &dir)?, None),
             None => {
-                let t = &job.target;
-                let (key, spec) = target_spec(
-                    "target",
-                    (&t.brdf, &t.highlight, t.highlight_extent_deg, &t.material),
-                    &dir,
-                )
-                .map_err(&invalid)?;
-                Brdf::parse(&spec).map_err(|e| invalid(format!("`{key}`: {e}")))?
+                let (single, merl) = targets::single_target(&self.target, &dir)?;
+                (vec![single], merl)
             }
         };
-        if !matches!(job.target.base.as_str(), "scallop" | "none") {
-            Brdf::parse(&resolve_spec(&job.target.base, &dir)).map_err(|e| invalid(format!("`target.base`: {e}")))?;
+        if !matches!(self.target.base.as_str(), "scallop" | "none") {
+            Brdf::parse(&resolve_spec(&self.target.base, &dir)).map_err(|e| format!("`target.base`: {e}"))?;
         }
-        if let Some(p) = &job.target.polish {
-            Brdf::parse(&resolve_spec(p, &dir)).map_err(|e| invalid(format!("`target.polish`: {e}")))?;
+        if let Some(p) = &self.target.polish {
+            Brdf::parse(&resolve_spec(p, &dir)).map_err(|e| format!("`target.polish`: {e}"))?;
         }
         let (machine_path, machine) =
-            load_profile(&job.machine.profile, &dir).map_err(|e| invalid(format!("`machine.profile`: {e}")))?;
-        let tool = machine
-            .tool(&job.toolpath.tool)
-            .map_err(|e| invalid(format!("`toolpath.tool`: {e}")))?;
-        if !matches!(tool.shape, Shape::Ball { .. }) {
-            return Err(invalid(format!(
-                "`toolpath.tool` = `{}` is {:?}: finishing needs a ball-nose",
-                tool.id,
-                tool.shape.kind()
-            )));
-        }
-        job.ndf.validate().map_err(|e| invalid(e.to_string()))?;
-        if !relief_given {
-            job.facets.max_relief_mm = tool_relief_budget(tool, &machine);
-        }
-        let slope_cap_from = if cap_given {
-            "job (`facets.max_slope_deg`)".to_string()
-        } else {
-            let budget = if job.facets.max_relief_mm > 0.0 {
-                job.facets.max_relief_mm
-            } else {
-                tool_relief_budget(tool, &machine)
-            };
-            let (deg, why) = tool_slope_cap(tool, budget, job.facets.facet_mm, job.ndf.max_angle_deg);
-            job.facets.max_slope_deg = deg;
-            why
-        };
-        job.design.validate().map_err(|e| invalid(e.to_string()))?;
-        job.facets.validate().map_err(|e| invalid(e.to_string()))?;
-        if tool.diameter_mm() > job.facets.facet_mm + 1e-9 {
-            return Err(invalid(format!(
+            Machine::find(&self.machine.profile, &dir).map_err(|e| format!("`machine.profile`: {e}"))?;
+        let toolpath = self
+            .toolpath_config()
+            .check(&machine, self.facets.pitch_um * 1e-3)
+            .map_err(|e| keyed::<ToolpathConfig>("toolpath", &e.to_string()))?;
+        self.ndf
+            .validate()
+            .map_err(|e| keyed::<NdfConfig>("ndf", &e.to_string()))?;
+        let slope_cap_from = self.derive_budgets(&toolpath.tool, &machine, given);
+        self.design
+            .validate()
+            .map_err(|e| keyed::<DesignConfig>("design", &e.to_string()))?;
+        self.facets
+            .validate()
+            .map_err(|e| keyed::<FacetsConfig>("facets", &e.to_string()))?;
+        let tool = &toolpath.tool;
+        if tool.diameter_mm() > self.facets.facet_mm + 1e-9 {
+            return Err(format!(
                 "impossible combination: `toolpath.tool` `{}` is {} mm across, larger than a facet (`facets.facet_mm` = {} mm); the bit could not cut one facet's plane",
-                tool.id, tool.diameter_mm(), job.facets.facet_mm
-            )));
+                tool.id, tool.diameter_mm(), self.facets.facet_mm
+            ));
         }
-        let [ax, ay] = job.toolpath.area_mm;
-        if ax > machine.travel.x_mm || ay > machine.travel.y_mm {
-            return Err(invalid(format!(
-                "impossible combination: `toolpath.area_mm` = [{ax}, {ay}] is larger than the machine's travel {}×{} mm ({})",
-                machine.travel.x_mm,
-                machine.travel.y_mm,
-                machine_path.display()
-            )));
-        }
-        if !(ax > 0.0 && ay > 0.0) {
-            return Err(invalid(format!(
-                "`toolpath.area_mm` must be positive, got [{ax}, {ay}]"
-            )));
-        }
-        check_work(&job, tool.radius_mm()).map_err(invalid)?;
-        // everything the toolpath stage checks without the tile, now rather than after the design
-        crate::cut::machine::program_text("name", &job.name).map_err(|e| invalid(e.to_string()))?;
-        crate::stages::toolpath::check_config(&job.toolpath_config(), &machine, job.facets.pitch_um * 1e-3)
-            .map_err(|e| invalid(e.to_string()))?;
-        job.verify.validate().map_err(|e| invalid(e.to_string()))?;
-        let labels = match &job.svbrdf {
-            Some(sv) => Some(read_labels(&job, sv, &regions, &dir).map_err(|e| invalid(e.to_string()))?),
+        self.simulate
+            .config(&toolpath)
+            .check_area(self.toolpath.area_mm)
+            .map_err(|e| keyed::<SimulateSection>("simulate", &e.to_string()))?;
+        self.verify
+            .validate()
+            .map_err(|e| keyed::<VerifyConfig>("verify", &e.to_string()))?;
+        let labels = match &self.svbrdf {
+            Some(sv) => Some(targets::read_labels(&self, sv, &targets, &dir)?),
             None => None,
         };
         Ok(Ready {
-            job,
+            job: self,
             dir,
-            target,
-            regions,
+            targets,
             labels,
             machine,
             machine_path,
+            toolpath,
             slope_cap_from,
-            prepared,
+            merl,
         })
     }
-}
 
-/// The fields that name a target: a BRDF spec, or a highlight with its extent and material.
-type TargetFields<'a> = (&'a String, &'a Option<String>, Option<f64>, &'a Option<String>);
-
-/// A target's BRDF spec, from `SECTION.brdf` or from `SECTION.highlight` (with its extent and material), and
-/// the key it came from. Exactly one of the two must be given; the highlight's keys only go with it.
-fn target_spec(
-    section: &str,
-    (brdf, highlight, extent, material): TargetFields,
-    dir: &Path,
-) -> Result<(String, String), String> {
-    match (highlight, brdf.trim().is_empty()) {
-        (Some(_), false) => Err(format!("give `{section}.brdf` or `{section}.highlight`, not both")),
-        (None, true) => Err(format!(
-            "missing `{section}.brdf` (a BRDF spec) or `{section}.highlight` (a PNG)"
-        )),
-        (None, false) => {
-            for (key, given) in [
-                ("highlight_extent_deg", extent.is_some()),
-                ("material", material.is_some()),
-            ] {
-                if given {
-                    return Err(format!(
-                        "`{section}.{key}` goes with `{section}.highlight`; with `{section}.brdf` give the material in the spec (`…,material=NAME`)"
-                    ));
-                }
-            }
-            Ok((format!("{section}.brdf"), resolve_spec(brdf, dir)))
+    /// The facets' relief budget and steepest facet from the finishing tool, where the job does not give them
+    /// (DESIGN.md §4.4); says where the steepest facet came from.
+    fn derive_budgets(&mut self, tool: &crate::cut::machine::Tool, machine: &Machine, given: Given) -> String {
+        if !given.relief {
+            self.facets.max_relief_mm = tool_relief_budget(tool, machine);
         }
-        (Some(path), true) => {
-            let spec = crate::stages::brdf::highlight::spec(path, extent, material.as_deref())
-                .map_err(|e| format!("`{section}.highlight`: {e}"))?;
-            Ok((format!("{section}.highlight"), resolve_spec(&spec, dir)))
+        if given.slope_cap {
+            return "job (`facets.max_slope_deg`)".to_string();
         }
+        let budget = if self.facets.max_relief_mm > 0.0 {
+            self.facets.max_relief_mm
+        } else {
+            tool_relief_budget(tool, machine)
+        };
+        let (deg, why) = tool_slope_cap(tool, budget, self.facets.facet_mm, self.ndf.max_angle_deg);
+        self.facets.max_slope_deg = deg;
+        why
     }
 }
 
-/// `[[svbrdf.region]]` → each region's target, with names and colours checked (valid, distinct). With
-/// regions, `[target]` gives no target of its own (only `base` and `polish`).
-fn region_targets(t: &TargetSection, sv: &SvbrdfSection, dir: &Path) -> Result<Vec<RegionTarget>, String> {
-    if !t.brdf.trim().is_empty() || t.highlight.is_some() || t.material.is_some() || t.highlight_extent_deg.is_some() {
-        return Err(
-            "with `[svbrdf]` each `[[svbrdf.region]]` names its own target: leave `target.brdf`, `target.highlight` and their keys out (`[target]` keeps `base` and `polish`)".into(),
-        );
-    }
-    if t.merl_from.is_some() {
-        return Err("`target.merl_from` does not go with `[svbrdf]`".into());
-    }
-    if sv.region.len() < 2 {
-        return Err(format!(
-            "`[svbrdf]` needs at least two `[[svbrdf.region]]` (got {}); a single target goes in `[target]`",
-            sv.region.len()
-        ));
-    }
-    if sv.region.len() > crate::stages::svbrdf::MAX_REGIONS {
-        return Err(format!(
-            "`[svbrdf]` has {} regions; at most {}",
-            sv.region.len(),
-            crate::stages::svbrdf::MAX_REGIONS
-        ));
-    }
-    let mut out: Vec<RegionTarget> = vec![];
-    for (k, r) in sv.region.iter().enumerate() {
-        let section = format!("svbrdf.region[{}]", k + 1);
-        crate::stages::svbrdf::check_name(&r.name).map_err(|e| format!("`{section}.name`: {e}"))?;
-        let color = crate::stages::svbrdf::parse_color(&r.color).map_err(|e| format!("`{section}.color`: {e}"))?;
-        if let Some(o) = out.iter().find(|o| o.name == r.name) {
-            return Err(format!("`{section}.name`: `{}` is already a region's name", o.name));
-        }
-        if let Some(o) = out.iter().find(|o| o.color == color) {
-            return Err(format!(
-                "`{section}.color`: {} is already region `{}`'s colour",
-                crate::stages::svbrdf::hex(color),
-                o.name
-            ));
-        }
-        let (key, spec) = target_spec(
-            &section,
-            (&r.brdf, &r.highlight, r.highlight_extent_deg, &r.material),
-            dir,
-        )?;
-        let target = Brdf::parse(&spec).map_err(|e| format!("`{key}`: {e}"))?;
-        out.push(RegionTarget {
-            name: r.name.clone(),
-            color,
-            spec,
-            target,
-        });
-    }
-    Ok(out)
+/// Which of the facets' budget keys the job gives itself.
+#[derive(Clone, Copy)]
+struct Given {
+    slope_cap: bool,
+    relief: bool,
 }
 
-/// Read the label image of `[svbrdf]` against its regions and the work area, and refuse a region too small
-/// to hold one tile period.
-fn read_labels(job: &Job, sv: &SvbrdfSection, regions: &[RegionTarget], dir: &Path) -> Result<Labels, String> {
-    let f = &job.facets;
-    let [ax, ay] = job.toolpath.area_mm;
-    let pitch_mm = f.pitch_um * 1e-3;
-    let cells = (ax / pitch_mm).round() * (ay / pitch_mm).round();
-    if cells > crate::stages::svbrdf::MAX_PART_CELLS as f64 {
-        return Err(format!(
-            "`[svbrdf]`: the composed part would be {cells:.0} cells (`toolpath.area_mm` = [{ax}, {ay}] at `facets.pitch_um` = {}); at most {}",
-            f.pitch_um,
-            crate::stages::svbrdf::MAX_PART_CELLS
-        ));
-    }
-    let path = dir.join(&sv.labels);
-    let names: Vec<String> = regions.iter().map(|r| r.name.clone()).collect();
-    let colors: Vec<[u8; 3]> = regions.iter().map(|r| r.color).collect();
-    let labels =
-        Labels::read(&path, &names, &colors, job.toolpath.area_mm).map_err(|e| format!("`svbrdf.labels`: {e}"))?;
-    labels
-        .check_period([f.facets_x as f64 * f.facet_mm, f.facets_y as f64 * f.facet_mm])
-        .map_err(|e| format!("`svbrdf.region`: {e}"))?;
-    Ok(labels)
-}
-
-/// `target.merl_from`: write the `merl:` file `target.brdf` names from that spec when the file is missing.
-/// Returns what was written, if anything.
-fn make_missing_merl(t: &TargetSection, dir: &Path) -> Result<Option<String>, String> {
-    let Some(from) = &t.merl_from else {
-        return Ok(None);
+/// A stage's refusal in the job's words: each `` `key` `` of the section's configuration `C` that the message
+/// names becomes `` `section.key` ``.
+fn keyed<C: Serialize + Default>(section: &str, message: &str) -> String {
+    let keys: Vec<String> = match toml::Value::try_from(C::default()) {
+        Ok(toml::Value::Table(t)) => t.keys().cloned().collect(),
+        _ => vec![],
     };
-    let spec = resolve_spec(&t.brdf, dir);
-    let Some(rest) = spec.strip_prefix("merl:") else {
-        return Err(format!(
-            "only a `merl:` target can be written from a spec; `target.brdf` is `{}`",
-            t.brdf
-        ));
-    };
-    let path = PathBuf::from(rest.split(',').next().unwrap_or(rest).trim());
-    if path.exists() {
-        return Ok(None);
+    let mut out = message.to_string();
+    for k in keys {
+        out = out.replace(&format!("`{k}`"), &format!("`{section}.{k}`"));
     }
-    let source = Brdf::parse(from).map_err(|e| e.to_string())?;
-    if matches!(source.model, crate::stages::brdf::Model::Merl(_)) {
-        return Err(format!(
-            "`{from}` is itself a MERL file: name an analytic or measured model"
-        ));
-    }
-    crate::stages::brdf::Merl::from_fn(|wi, wo| source.eval(wi, wo))
-        .write(&path)
-        .map_err(|e| e.to_string())?;
-    Ok(Some(format!(
-        "wrote {} from `{from}` (`target.merl_from`)",
-        path.display()
-    )))
+    out
 }
 
 /// Margin kept between a tile's relief and the finishing tool's flute length, fraction of the flutes.
@@ -547,12 +467,6 @@ pub fn tool_slope_cap(tool: &crate::cut::machine::Tool, budget_mm: f64, facet_mm
     }
 }
 
-/// A machine profile by path (relative to the job's folder) or by a shipped profile's name
-/// ([`Machine::find`]).
-fn load_profile(profile: &str, dir: &Path) -> Result<(PathBuf, Machine), String> {
-    Machine::find(profile, dir).map_err(|e| e.to_string())
-}
-
 /// Set `section.key=value` (dotted path, TOML value) in a parsed job.
 fn apply_override(raw: &mut toml::Value, o: &str) -> Result<(), String> {
     let (key, value) = o.split_once('=').ok_or("expected SECTION.KEY=VALUE")?;
@@ -581,66 +495,6 @@ fn apply_override(raw: &mut toml::Value, o: &str) -> Result<(), String> {
     Ok(())
 }
 
-/// The most finishing passes a job may ask for (a 1 µm scallop with a 0.5 mm ball is 45 µm apart: 2,700
-/// passes over 120 mm).
-pub const MAX_PASSES: f64 = 200_000.0;
-
-/// The most simulated stock cells (8 bytes each: 4 GB).
-pub const MAX_SIM_CELLS: f64 = 5e8;
-
-/// Bound the work of the toolpath and simulate stages before anything runs: the stepover (from the scallop
-/// or given) and the pass count it implies, the simulation's cell count and arc tolerance. The message
-/// names the key and gives the estimate.
-fn check_work(job: &Job, r_mm: f64) -> Result<(), String> {
-    let t = &job.toolpath;
-    let [ax, ay] = t.area_mm;
-    let stepover = if t.stepover_mm != 0.0 {
-        if !(t.stepover_mm.is_finite() && t.stepover_mm > 0.0) {
-            return Err(format!(
-                "`toolpath.stepover_mm` must be a positive length (or 0: from the scallop), got {}",
-                t.stepover_mm
-            ));
-        }
-        t.stepover_mm
-    } else {
-        let h = t.scallop_um * 1e-3;
-        if !(h.is_finite() && h > 0.0 && h < r_mm) {
-            return Err(format!(
-                "`toolpath.scallop_um` must be in (0, {}) µm for the {} mm ball, got {}",
-                r_mm * 1e3,
-                2.0 * r_mm,
-                t.scallop_um
-            ));
-        }
-        crate::stages::toolpath::raster::stepover_for_scallop(r_mm, h)
-    };
-    let passes = ax.hypot(ay) / stepover;
-    if passes > MAX_PASSES {
-        return Err(format!(
-            "the stepover {stepover:.3e} mm (`toolpath.scallop_um` = {} / `toolpath.stepover_mm` = {}) needs about {passes:.3e} passes over {ax}×{ay} mm, more than {MAX_PASSES:e}",
-            t.scallop_um, t.stepover_mm
-        ));
-    }
-    let p = job.simulate.pitch_um;
-    if !(p.is_finite() && p > 0.0) {
-        return Err(format!("`simulate.pitch_um` must be positive, got {p}"));
-    }
-    let margin_mm = 2.0 * r_mm + 1.0;
-    let cells = ((ax + margin_mm) / (p * 1e-3)) * ((ay + margin_mm) / (p * 1e-3));
-    if cells > MAX_SIM_CELLS {
-        return Err(format!(
-            "`simulate.pitch_um` = {p} over {ax}×{ay} mm is about {cells:.3e} stock cells, more than {MAX_SIM_CELLS:e} (8 bytes each)"
-        ));
-    }
-    let a = job.simulate.arc_tolerance_um;
-    if !(a.is_finite() && (1e-3..=100.0).contains(&a)) {
-        return Err(format!(
-            "`simulate.arc_tolerance_um` must be in [0.001, 100] µm, got {a}"
-        ));
-    }
-    Ok(())
-}
-
 /// Paths in `merl:`, `rgl:` and `csv:` specs are relative to the job file.
 pub(crate) fn resolve_spec(spec: &str, dir: &Path) -> String {
     for kind in ["merl:", "rgl:", "csv:", "highlight:"] {
@@ -657,18 +511,22 @@ pub(crate) fn resolve_spec(spec: &str, dir: &Path) -> String {
     spec.to_string()
 }
 
-mod regions;
-mod run;
+mod artifacts;
+mod outcome;
+mod runner;
+mod stages;
 mod summary;
+mod targets;
 
-pub use run::{run, Outcome, Progress, Stage};
+pub use outcome::{Outcome, Progress, Stage, RUN_STATE};
+pub use runner::run;
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    /// `target.merl_from` writes the missing file once, and what it wrote reads back as the model it came
-    /// from; it refuses a target that is not a `merl:` file.
+    /// `target.merl_from` has the run write the missing file once (loading writes nothing), and what it wrote
+    /// reads back as the model it came from; it refuses a target that is not a `merl:` file.
     #[test]
     fn a_missing_merl_file_is_written_from_its_spec_once() {
         let dir = tempfile::tempdir().unwrap();
@@ -684,13 +542,15 @@ mod tests {
             p
         };
         let ready = Job::load(&job("merl:m.binary")).unwrap();
-        assert_eq!(ready.prepared.len(), 1, "{:?}", ready.prepared);
+        assert!(!dir.path().join("m.binary").exists(), "loading a job writes nothing");
+        let merl = ready.merl.as_ref().expect("the run is to write the file");
+        merl.write(&ready.targets[0].spec).unwrap();
         let written = std::fs::metadata(dir.path().join("m.binary"))
             .unwrap()
             .modified()
             .unwrap();
         let again = Job::load(&job("merl:m.binary")).unwrap();
-        assert!(again.prepared.is_empty());
+        assert!(again.merl.is_none());
         assert_eq!(
             std::fs::metadata(dir.path().join("m.binary"))
                 .unwrap()
@@ -703,7 +563,7 @@ mod tests {
             crate::base::geometry::spherical(0.4, 0.3),
             crate::base::geometry::spherical(0.3, 2.9),
         );
-        let (a, b) = (again.target.eval(&wi, &wo)[1], model.eval(&wi, &wo)[1]);
+        let (a, b) = (again.target().eval(&wi, &wo)[1], model.eval(&wi, &wo)[1]);
         assert!((a / b - 1.0).abs() < 0.05, "{a} against {b}");
         let e = Job::load(&job("beckmann:alpha=0.2"))
             .err()
@@ -718,7 +578,7 @@ mod tests {
     #[test]
     fn shipped_profiles_are_found_by_name_and_a_wrong_name_lists_them() {
         let dir = tempfile::tempdir().unwrap();
-        let (p, m) = load_profile("grbl-3018", dir.path()).unwrap();
+        let (p, m) = Machine::find("grbl-3018", dir.path()).unwrap();
         assert!(p.display().to_string().contains("shipped"));
         let on_disk = Machine::load(Path::new(concat!(
             env!("CARGO_MANIFEST_DIR"),
@@ -726,7 +586,7 @@ mod tests {
         )))
         .unwrap();
         assert_eq!(m, on_disk);
-        let e = load_profile("grbl-9999", dir.path()).unwrap_err();
+        let e = Machine::find("grbl-9999", dir.path()).unwrap_err().to_string();
         assert!(e.contains("grbl-router-6040") && e.contains("linuxcnc-mill"), "{e}");
     }
 }

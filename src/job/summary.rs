@@ -111,7 +111,7 @@ pub(super) fn region_parameters(
             ),
         );
     }
-    for ((reg, n), (t, off)) in ready.regions.iter().zip(ndfs).zip(tiles.iter().zip(&part.offsets_mm)) {
+    for ((reg, n), (t, off)) in ready.targets.iter().zip(ndfs).zip(tiles.iter().zip(&part.offsets_mm)) {
         rows.push((
             format!("region `{}` ({})", reg.name, crate::stages::svbrdf::hex(reg.color)),
             format!(

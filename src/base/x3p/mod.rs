@@ -717,7 +717,7 @@ fn main_xml(hf: &Heightfield, data_md5: &str) -> String {
 pub fn write(path: &Path, hf: &Heightfield) -> Result<(), X3pError> {
     hf.check_invariants().map_err(|message| X3pError::Invalid {
         path: path.to_path_buf(),
-        message,
+        message: message.to_string(),
     })?;
     let data: Vec<u8> = hf.z_mm.iter().flat_map(|v| (v * 1e-3).to_le_bytes()).collect();
     let xml = main_xml(hf, &hex(&Md5::digest(&data)));

@@ -27,6 +27,7 @@
 use super::BrdfError;
 use crate::base::geometry::{normal_to_slope, Vec3};
 use crate::base::slope::{SlopeDomain, SlopeGrid, SmithTable};
+use crate::base::Invalid;
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -73,9 +74,9 @@ pub struct Highlight {
 /// The `highlight:` spec of an image with an optional extent and material (a job's `target.highlight`, or
 /// `brdfmill ndf --highlight`). The error says which value a spec cannot hold: a path with a comma, or a
 /// material that is not a bare name.
-pub fn spec(path: &str, extent_deg: Option<f64>, material: Option<&str>) -> Result<String, String> {
+pub fn spec(path: &str, extent_deg: Option<f64>, material: Option<&str>) -> Result<String, Invalid> {
     if path.contains(',') {
-        return Err(format!("the image path `{path}` must not contain a comma"));
+        return Err(Invalid(format!("the image path `{path}` must not contain a comma")));
     }
     let mut spec = format!("highlight:{path}");
     if let Some(e) = extent_deg {
@@ -83,7 +84,7 @@ pub fn spec(path: &str, extent_deg: Option<f64>, material: Option<&str>) -> Resu
     }
     if let Some(m) = material {
         if m.contains(',') || m.contains('=') {
-            return Err(format!("the material `{m}` is not a material name"));
+            return Err(Invalid(format!("the material `{m}` is not a material name")));
         }
         spec.push_str(&format!(",material={m}"));
     }
@@ -117,16 +118,16 @@ pub fn screen_to_slope(x: f64, y: f64) -> (f64, f64) {
 impl Highlight {
     /// Read a PNG (grey or colour, 8 or 16 bits, any alpha) as a highlight spanning `extent_deg`.
     pub fn read(path: &Path, extent_deg: f64) -> Result<Self, BrdfError> {
-        let fmt = |reason: String| BrdfError::Format {
+        let fmt = |reason: Invalid| BrdfError::Format {
             path: path.to_path_buf(),
-            reason,
+            reason: reason.0,
         };
         if let Ok(m) = std::fs::metadata(path) {
             if m.len() > MAX_FILE_BYTES {
-                return Err(fmt(format!(
+                return Err(fmt(Invalid(format!(
                     "the file is {} bytes; a highlight PNG of at most {MAX_FILE_BYTES} bytes is accepted",
                     m.len()
-                )));
+                ))));
             }
         }
         let bytes = crate::base::io::read(path)?;
@@ -135,29 +136,35 @@ impl Highlight {
     }
 
     /// A highlight from linear luminance (row-major, top row first). The error says what is wrong.
-    pub fn from_luminance(path: &Path, w: usize, h: usize, pixels: Vec<f64>, extent_deg: f64) -> Result<Self, String> {
+    pub fn from_luminance(path: &Path, w: usize, h: usize, pixels: Vec<f64>, extent_deg: f64) -> Result<Self, Invalid> {
         if !(extent_deg >= EXTENT_DEG.0 && extent_deg <= EXTENT_DEG.1) {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "the highlight's extent must be in [{}, {}] degrees of reflection, got {extent_deg}",
                 EXTENT_DEG.0, EXTENT_DEG.1
-            ));
+            )));
         }
         if pixels.len() != w * h {
-            return Err(format!("{} pixel values for a {w} × {h} image", pixels.len()));
+            return Err(Invalid(format!("{} pixel values for a {w} × {h} image", pixels.len())));
         }
         let f = w.max(h).div_ceil(COMPARE_SIDE_PX).max(1);
         if w / f < 2 || h / f < 2 {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "the image is {w} × {h} pixels: too thin to compare with (each side must keep at least 2 pixels when the longer one is reduced to {COMPARE_SIDE_PX})"
-            ));
+            )));
         }
         if let Some(i) = pixels.iter().position(|v| !(v.is_finite() && *v >= 0.0)) {
-            return Err(format!("pixel {} of row {} is not a finite value ≥ 0", i % w, i / w));
+            return Err(Invalid(format!(
+                "pixel {} of row {} is not a finite value ≥ 0",
+                i % w,
+                i / w
+            )));
         }
         let sum: f64 = pixels.iter().sum();
         let max = pixels.iter().fold(0.0f64, |a, b| a.max(*b));
         if sum <= 0.0 || max < 1e-6 {
-            return Err("the image has no highlight: every pixel is black (or fully transparent)".into());
+            return Err(Invalid(
+                "the image has no highlight: every pixel is black (or fully transparent)".into(),
+            ));
         }
         let pixel_tan = extent_deg.to_radians().tan() / (w.max(h) as f64 / 2.0);
         let mut out = Self {
@@ -390,7 +397,7 @@ fn srgb_decode(c: f64) -> f64 {
 
 /// Decode a PNG to linear luminance × alpha: `(width, height, pixels)`, top row first
 /// ([`crate::base::image::decode_png`] does the checks).
-fn decode_png(bytes: &[u8]) -> Result<(usize, usize, Vec<f64>), String> {
+fn decode_png(bytes: &[u8]) -> Result<(usize, usize, Vec<f64>), Invalid> {
     let img = crate::base::image::decode_png(bytes)?;
     let lin = |v: u8| srgb_decode(v as f64 / 255.0);
     let pixels = img

@@ -20,6 +20,7 @@
 
 use super::{BrdfError, Rgb};
 use crate::base::geometry::{cos_sin_phi, Vec3};
+use crate::base::Invalid;
 use std::collections::BTreeMap;
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use std::path::Path;
@@ -84,7 +85,7 @@ fn f16_to_f64(h: u16) -> f64 {
 
 impl TensorFile {
     /// Parse a tensor file from bytes; errors say which field or byte offset is wrong.
-    pub fn parse(bytes: &[u8]) -> Result<Self, String> {
+    pub fn parse(bytes: &[u8]) -> Result<Self, Invalid> {
         let mut pos = 0usize;
         let take = |pos: &mut usize, n: usize, what: &str| -> Result<&[u8], String> {
             let end = pos.checked_add(n).filter(|e| *e <= bytes.len()).ok_or_else(|| {
@@ -99,15 +100,17 @@ impl TensorFile {
             Ok(s)
         };
         if take(&mut pos, 12, "magic")? != b"tensor_file\0" {
-            return Err("not a tensor file: the first 12 bytes are not \"tensor_file\\0\"".into());
+            return Err(Invalid(
+                "not a tensor file: the first 12 bytes are not \"tensor_file\\0\"".into(),
+            ));
         }
         let v = take(&mut pos, 2, "version")?;
         let version = (v[0], v[1]);
         if version.0 != 1 {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "tensor_file version {}.{} is not supported (expected 1.x)",
                 v[0], v[1]
-            ));
+            )));
         }
         let n = u32::from_le_bytes(take(&mut pos, 4, "field count")?.try_into().unwrap()) as usize;
         let mut fields = BTreeMap::new();
@@ -265,12 +268,12 @@ impl RglBsdf {
         let bytes = crate::base::io::read(path)?;
         Self::from_bytes(&bytes).map_err(|reason| BrdfError::Format {
             path: path.to_path_buf(),
-            reason,
+            reason: reason.to_string(),
         })
     }
 
     /// Parse from the bytes of a `.bsdf` file.
-    pub fn from_bytes(bytes: &[u8]) -> Result<Self, String> {
+    pub fn from_bytes(bytes: &[u8]) -> Result<Self, Invalid> {
         let tf = TensorFile::parse(bytes)?;
         let description = tf
             .fields
@@ -281,7 +284,7 @@ impl RglBsdf {
         let phi_i = tf.field("phi_i", 1)?.data.clone();
         let (nt, np) = (theta_i.len(), phi_i.len());
         if nt == 0 || np == 0 {
-            return Err("theta_i and phi_i must not be empty".into());
+            return Err(Invalid("theta_i and phi_i must not be empty".into()));
         }
         // radians; f32 in the file, so π/2 may come out a few ulps above
         for (name, axis, hi) in [
@@ -289,29 +292,34 @@ impl RglBsdf {
             ("phi_i", &phi_i, std::f64::consts::TAU),
         ] {
             if axis.iter().any(|v| !(v.is_finite() && (-1e-6..=hi + 1e-6).contains(v))) {
-                return Err(format!("`{name}` must hold angles in [0, {hi:.6}] rad, got {axis:?}"));
+                return Err(Invalid(format!(
+                    "`{name}` must hold angles in [0, {hi:.6}] rad, got {axis:?}"
+                )));
             }
             if axis.windows(2).any(|w| w[1] <= w[0]) {
-                return Err(format!("`{name}` must be strictly increasing, got {axis:?}"));
+                return Err(Invalid(format!("`{name}` must be strictly increasing, got {axis:?}")));
             }
         }
-        let grid2 = |name: &str| -> Result<Grid2, String> {
+        let grid2 = |name: &str| -> Result<Grid2, Invalid> {
             let f = tf.field(name, 2)?;
             let (ny, nx) = (f.shape[0], f.shape[1]);
             if nx < 2 || ny < 2 {
-                return Err(format!("field `{name}` shape {:?}: need at least 2×2", f.shape));
+                return Err(Invalid(format!(
+                    "field `{name}` shape {:?}: need at least 2×2",
+                    f.shape
+                )));
             }
             // RGL stores [φ, θ]: θ is the long axis (128 in the published files), φ has 2 rows when isotropic
             if nx < 8 || ny > nx {
-                return Err(format!(
+                return Err(Invalid(format!(
                     "field `{name}` shape {:?}: expected [φ, θ] with at least 8 θ samples and no more φ than θ (are the axes swapped?)",
                     f.shape
-                ));
+                )));
             }
             if let Some(v) = f.data.iter().find(|v| !(v.is_finite() && v.abs() <= 1e12)) {
-                return Err(format!(
+                return Err(Invalid(format!(
                     "field `{name}` holds {v}: not a finite density of at most 1e12"
-                ));
+                )));
             }
             Ok(Grid2 {
                 nx,
@@ -322,23 +330,23 @@ impl RglBsdf {
         let ndf = grid2("ndf")?;
         let sigma = grid2("sigma")?;
         if ndf.v.iter().chain(&sigma.v).any(|v| *v < 0.0) {
-            return Err("`ndf` and `sigma` must be non-negative".into());
+            return Err(Invalid("`ndf` and `sigma` must be non-negative".into()));
         }
         let vf = tf.field("vndf", 4)?;
         if vf.shape[0] != np || vf.shape[1] != nt || vf.shape[2] < 2 || vf.shape[3] < 2 {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "field `vndf` shape {:?}, expected [{np}, {nt}, ≥2, ≥2]",
                 vf.shape
-            ));
+            )));
         }
         let (vy, vx) = (vf.shape[2], vf.shape[3]);
         let vndf = vf.data.chunks_exact(vx * vy).map(|s| Warp::new(s, vx, vy)).collect();
         let rf = tf.field("rgb", 5)?;
         if rf.shape[0] != np || rf.shape[1] != nt || rf.shape[2] != 3 || rf.shape[3] < 2 || rf.shape[4] < 2 {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "field `rgb` shape {:?}, expected [{np}, {nt}, 3, ≥2, ≥2]",
                 rf.shape
-            ));
+            )));
         }
         let (ry, rx) = (rf.shape[3], rf.shape[4]);
         let rgb = rf

@@ -11,6 +11,7 @@
 use super::BrdfError;
 use crate::base::geometry::{cos_sin_phi, normal_to_slope, Vec3};
 use crate::base::slope::{SlopeDomain, SlopeGrid, SmithTable};
+use crate::base::Invalid;
 use std::path::Path;
 
 /// A tabulated, normalised NDF with the Smith masking of its own slopes.
@@ -40,12 +41,12 @@ impl TabulatedNdf {
         let text = crate::base::io::read_to_string(path)?;
         Self::parse(&text).map_err(|reason| BrdfError::Format {
             path: path.to_path_buf(),
-            reason,
+            reason: reason.0,
         })
     }
 
     /// Parse CSV text; the error names the line and what was expected.
-    pub fn parse(text: &str) -> Result<Self, String> {
+    pub fn parse(text: &str) -> Result<Self, Invalid> {
         let mut rows: Vec<(f64, f64, f64)> = Vec::new();
         let mut seen_data = false;
         for (n, line) in text.lines().enumerate() {
@@ -63,30 +64,33 @@ impl TabulatedNdf {
                     continue;
                 }
                 Err(_) => {
-                    return Err(format!(
+                    return Err(Invalid(format!(
                         "line {lineno}: expected three numbers theta_h_deg,phi_h_deg,value, got `{l}`"
-                    ))
+                    )))
                 }
             };
             seen_data = true;
             if nums.len() != 3 {
-                return Err(format!(
+                return Err(Invalid(format!(
                     "line {lineno}: expected 3 fields theta_h_deg,phi_h_deg,value, got {}",
                     nums.len()
-                ));
+                )));
             }
             let names = ["theta_h_deg", "phi_h_deg", "value"];
             if let Some(k) = nums.iter().position(|v| !v.is_finite()) {
-                return Err(format!(
+                return Err(Invalid(format!(
                     "line {lineno}: {} is `{}`, expected a finite number",
                     names[k], fields[k]
-                ));
+                )));
             }
             if !(0.0..=90.0).contains(&nums[0]) {
-                return Err(format!("line {lineno}: theta_h_deg = {} outside [0, 90]", nums[0]));
+                return Err(Invalid(format!(
+                    "line {lineno}: theta_h_deg = {} outside [0, 90]",
+                    nums[0]
+                )));
             }
             if nums[2] < 0.0 {
-                return Err(format!("line {lineno}: value = {} is negative", nums[2]));
+                return Err(Invalid(format!("line {lineno}: value = {} is negative", nums[2])));
             }
             rows.push((
                 nums[0].to_radians(),
@@ -102,27 +106,30 @@ impl TabulatedNdf {
         let theta = uniq(rows.iter().map(|r| r.0).collect());
         let phi = uniq(rows.iter().map(|r| r.1).collect());
         if theta.len() < 2 {
-            return Err(format!("need at least 2 distinct theta_h values, got {}", theta.len()));
+            return Err(Invalid(format!(
+                "need at least 2 distinct theta_h values, got {}",
+                theta.len()
+            )));
         }
         if rows.len() != theta.len() * phi.len() {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "the samples must form a full grid: {} theta_h × {} phi_h values = {} samples, but the file has {}",
                 theta.len(),
                 phi.len(),
                 theta.len() * phi.len(),
                 rows.len()
-            ));
+            )));
         }
         let find = |v: &[f64], x: f64| v.iter().position(|a| (a - x).abs() < 1e-9).unwrap();
         let mut values = vec![f64::NAN; rows.len()];
         for r in &rows {
             let k = find(&theta, r.0) * phi.len() + find(&phi, r.1);
             if !values[k].is_nan() {
-                return Err(format!(
+                return Err(Invalid(format!(
                     "sample theta_h={:.4}°, phi_h={:.4}° is given twice",
                     r.0.to_degrees(),
                     r.1.to_degrees()
-                ));
+                )));
             }
             values[k] = r.2;
         }
@@ -139,12 +146,12 @@ impl TabulatedNdf {
         };
         let mass = table.projected_mass();
         if !mass.is_finite() {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "the values are too large: their projected mass is {mass} (each value must keep the integral finite)"
-            ));
+            )));
         }
         if mass <= 0.0 {
-            return Err("all values are zero: the distribution has no mass".to_string());
+            return Err(Invalid("all values are zero: the distribution has no mass".to_string()));
         }
         table.values.iter_mut().for_each(|v| *v /= mass);
         let grid = slope_grid_of(&table, SlopeDomain::square(256, 80f64.to_radians().tan()));

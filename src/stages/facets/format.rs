@@ -278,7 +278,7 @@ impl TileFile {
             periodic: self.heightfield.periodic,
             z_mm: z,
         };
-        hf.check_invariants().map_err(invalid)?;
+        hf.check_invariants().map_err(|e| invalid(e.0))?;
         Ok(hf)
     }
 }

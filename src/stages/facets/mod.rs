@@ -345,7 +345,7 @@ impl Tile {
 
 /// Restrict the NDF to the machinable cone: returns the density used for sampling and the mass beyond it.
 fn machinable(ndf: &SlopeGrid, cfg: &FacetsConfig) -> Result<(SlopeGrid, f64), FacetsError> {
-    ndf.check_invariants().map_err(FacetsError::Ndf)?;
+    ndf.check_invariants().map_err(|e| FacetsError::Ndf(e.0))?;
     let total = ndf.mass();
     if total.is_nan() || total <= 0.0 {
         return Err(FacetsError::Ndf("the density has no mass".into()));

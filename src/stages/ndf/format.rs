@@ -24,6 +24,7 @@
 
 use super::{LrReport, Ndf, NdfConfig, Source, Tilt};
 use crate::base::slope::{SlopeDomain, SlopeGrid, SlopeStats};
+use crate::base::Invalid;
 use crate::stages::brdf::ConductorIor;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -162,15 +163,18 @@ impl NdfFile {
     }
 
     /// Check the invariants readers rely on; the message names the key.
-    pub fn validate(&self) -> Result<(), String> {
+    pub fn validate(&self) -> Result<(), Invalid> {
         if self.format != FORMAT {
-            return Err(format!("\"format\" is \"{}\", expected \"{FORMAT}\"", self.format));
+            return Err(Invalid(format!(
+                "\"format\" is \"{}\", expected \"{FORMAT}\"",
+                self.format
+            )));
         }
         if self.version != VERSION {
-            return Err(format!(
+            return Err(Invalid(format!(
                 "\"version\" is {}, this build reads version {VERSION}",
                 self.version
-            ));
+            )));
         }
         for (key, values) in [("density", &self.density), ("observed", &self.observed)] {
             let g = SlopeGrid {
@@ -180,7 +184,9 @@ impl NdfFile {
             g.check_invariants().map_err(|e| format!("\"{key}\": {e}"))?;
             let m = g.mass();
             if (m - 1.0).abs() > 1e-3 {
-                return Err(format!("\"{key}\" has mass {m:.6}, expected 1 (a normalised density)"));
+                return Err(Invalid(format!(
+                    "\"{key}\" has mass {m:.6}, expected 1 (a normalised density)"
+                )));
             }
         }
         Ok(())
@@ -204,7 +210,7 @@ impl NdfFile {
             reason,
         };
         let f: NdfFile = serde_json::from_str(&text).map_err(|e| invalid(format!("not a valid ndf.json: {e}")))?;
-        f.validate().map_err(invalid)?;
+        f.validate().map_err(|e| invalid(e.0))?;
         Ok(f)
     }
 }

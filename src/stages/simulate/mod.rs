@@ -134,7 +134,7 @@ impl SimulateConfig {
         }
         let p = self.pitch_um;
         if !(p.is_finite() && p > 0.0) {
-            return bad(format!("pitch_um must be positive, got {p}"));
+            return bad(format!("`pitch_um` must be positive, got {p}"));
         }
         if self.tool.diameter_mm() < 2.0 * p * 1e-3 {
             return bad(format!(
@@ -142,9 +142,11 @@ impl SimulateConfig {
                 self.tool.diameter_mm()
             ));
         }
-        if !(self.arc_tolerance_um.is_finite() && self.arc_tolerance_um > 0.0) {
+        if !(self.arc_tolerance_um.is_finite()
+            && (MIN_ARC_TOLERANCE_UM..=MAX_ARC_TOLERANCE_UM).contains(&self.arc_tolerance_um))
+        {
             return bad(format!(
-                "arc_tolerance_um must be positive, got {}",
+                "`arc_tolerance_um` must be in [{MIN_ARC_TOLERANCE_UM}, {MAX_ARC_TOLERANCE_UM}] µm, got {}",
                 self.arc_tolerance_um
             ));
         }
@@ -167,6 +169,32 @@ impl SimulateConfig {
                  images and files hold more), got {}",
                 self.max_cells
             ));
+        }
+        Ok(())
+    }
+}
+
+/// The finest arc linearisation, µm (a nanometre: finer chords only multiply the segments).
+pub const MIN_ARC_TOLERANCE_UM: f64 = 1e-3;
+
+/// The coarsest arc linearisation, µm (a tenth of a millimetre would cut visibly polygonal arcs).
+pub const MAX_ARC_TOLERANCE_UM: f64 = 100.0;
+
+impl SimulateConfig {
+    /// Bound the stock before anything runs: a program over `area_mm` (plus the tool's diameter and a
+    /// millimetre of margin) at `pitch_um` is about this many cells, refused above `max_cells` with the field
+    /// and the estimate; every field checked as [`SimulateConfig::validate`] does.
+    pub fn check_area(&self, area_mm: [f64; 2]) -> Result<(), SimulateError> {
+        self.validate()?;
+        let [ax, ay] = area_mm;
+        let p = self.pitch_um;
+        let margin_mm = self.tool.diameter_mm() + 1.0;
+        let cells = ((ax + margin_mm) / (p * 1e-3)) * ((ay + margin_mm) / (p * 1e-3));
+        if cells > self.max_cells as f64 {
+            return Err(SimulateError::Limit(format!(
+                "`pitch_um` = {p} over {ax}×{ay} mm is about {cells:.3e} stock cells, more than {:e} (`max_cells`, 8 bytes each)",
+                self.max_cells as f64
+            )));
         }
         Ok(())
     }

@@ -18,6 +18,7 @@
 //! Every region's tile has the same period (the job's `facets`), laid from the work origin, so the facet
 //! lattices of all regions coincide and a border only switches which tile's heights are cut.
 
+use crate::base::Invalid;
 mod compose;
 mod edt;
 
@@ -115,10 +116,12 @@ pub enum SvbrdfError {
 }
 
 /// A colour `#rrggbb` (the `#` optional, case-insensitive).
-pub fn parse_color(s: &str) -> Result<[u8; 3], String> {
+pub fn parse_color(s: &str) -> Result<[u8; 3], Invalid> {
     let h = s.trim().trim_start_matches('#');
     if h.len() != 6 || !h.chars().all(|c| c.is_ascii_hexdigit()) {
-        return Err(format!("`{s}` is not a colour: expected #rrggbb, e.g. \"#000000\""));
+        return Err(Invalid(format!(
+            "`{s}` is not a colour: expected #rrggbb, e.g. \"#000000\""
+        )));
     }
     let v = |k: usize| u8::from_str_radix(&h[k..k + 2], 16).map_err(|e| e.to_string());
     Ok([v(0)?, v(2)?, v(4)?])
@@ -130,7 +133,7 @@ pub fn hex(c: [u8; 3]) -> String {
 }
 
 /// A region name usable in file names: 1–32 of `a–z`, `0–9`, `-`, `_`.
-pub fn check_name(name: &str) -> Result<(), String> {
+pub fn check_name(name: &str) -> Result<(), Invalid> {
     let ok = (1..=32).contains(&name.len())
         && name
             .bytes()
@@ -138,9 +141,9 @@ pub fn check_name(name: &str) -> Result<(), String> {
     if ok {
         Ok(())
     } else {
-        Err(format!(
+        Err(Invalid(format!(
             "`{name}` is not a region name: 1–32 of a–z, 0–9, `-` and `_` (it names the region's files)"
-        ))
+        )))
     }
 }
 
@@ -186,7 +189,7 @@ impl Labels {
             )));
         }
         let bytes = std::fs::read(path).map_err(|e| bad(format!("cannot read the label image: {e}")))?;
-        let img = crate::base::image::decode_png(&bytes).map_err(&bad)?;
+        let img = crate::base::image::decode_png(&bytes).map_err(|e| bad(e.0))?;
         let (w, h) = (img.width, img.height);
         if w < 2 || h < 2 {
             return Err(bad(format!(

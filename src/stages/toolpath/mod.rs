@@ -13,14 +13,16 @@
 pub(crate) mod arcs;
 mod build;
 pub mod check;
+mod plan;
 pub(crate) mod raster;
 pub(crate) mod rough;
 pub(crate) mod simplify;
 mod stock_side;
 
+pub use plan::{ToolpathPlan, MAX_CL_POINTS, MAX_GRID_CELLS, MAX_PASSES, MAX_TOLERANCE_UM, MIN_FEED_MM_MIN};
+
 use crate::base::heightfield::Heightfield;
 use crate::cut::machine::{self, Machine, Stock, Tool};
-use crate::cut::tool::Shape;
 use crate::cut::{dropcutter, estimate};
 use crate::gcode::emit;
 use crate::gcode::moves::{self, Move, P3};
@@ -191,202 +193,6 @@ pub struct Toolpath {
     pub summary: Summary,
 }
 
-/// The largest design grid the raster may sample, cells (8 bytes each: 3.2 GB).
-pub const MAX_GRID_CELLS: f64 = 4e8;
-
-/// The most finishing CL points a program may have (24 bytes each before simplification: 2.4 GB).
-pub const MAX_CL_POINTS: f64 = 1e8;
-
-/// The checked inputs of one program.
-struct Plan<'a> {
-    tool: &'a Tool,
-    rough: &'a Tool,
-    area: (f64, f64),
-    stepover: f64,
-    feed: f64,
-    strategy: Strategy,
-}
-
-/// `ToolpathError::Limit` naming the field and the estimate.
-fn limit(field: &str, what: String) -> ToolpathError {
-    ToolpathError::Limit {
-        field: field.to_string(),
-        estimate: what,
-    }
-}
-
-/// Bound the work before it starts (issue 13: a stepover of 1e-7 mm, a depth of cut of 1e-9 mm or a tool
-/// the size of the machine would run for hours or ask for terabytes): beyond [`check_config`]'s design grid
-/// and CL points, the layers of each tool from the tile's relief and the profile, refused with the field
-/// that drives them and the estimate.
-fn bound_work(cfg: &ToolpathConfig, tile: &Heightfield, p: &Plan) -> Result<(), ToolpathError> {
-    let relief = -tile.z_mm.iter().copied().fold(0.0, f64::min);
-    for t in [p.rough, p.tool] {
-        let doc = t.cutting(cfg.stock).max_depth_of_cut_mm;
-        let layers = relief / doc;
-        if layers > rough::MAX_LAYERS as f64 {
-            return Err(limit(
-                &format!("tools ({}).{:?}.max_depth_of_cut_mm", t.id, cfg.stock).to_lowercase(),
-                format!(
-                    "a relief of {relief:.4} mm at {doc:e} mm per cut is about {layers:.3e} layers, above {}",
-                    rough::MAX_LAYERS
-                ),
-            ));
-        }
-    }
-    Ok(())
-}
-
-/// The least cutting feed override, mm/min: feeds are written to 0.1 mm/min and the reduced ones (entries,
-/// engagement) are fractions of the cutting feed, so a smaller one would be written as `F0`.
-pub const MIN_FEED_MM_MIN: f64 = 1.0;
-
-/// The largest collinear-point tolerance, µm (a quarter of a millimetre would flatten the facets).
-pub const MAX_TOLERANCE_UM: f64 = 250.0;
-
-/// Check what needs no tile: `cfg` against `machine` (the tools, the area within travel, the tolerance,
-/// the raster, the feed, the job name for the header) and the work its area and stepover ask for on a
-/// design grid of `pitch_mm`, so that a job refuses them before any stage runs. [`run`] checks the same
-/// before it plans.
-pub fn check_config(cfg: &ToolpathConfig, machine: &Machine, pitch_mm: f64) -> Result<(), ToolpathError> {
-    checked(cfg, machine, pitch_mm).map(|_| ())
-}
-
-/// [`check_config`], returning what it found for [`plan`]: the finishing and roughing tools and the
-/// stepover, mm.
-fn checked<'a>(
-    cfg: &ToolpathConfig,
-    machine: &'a Machine,
-    pitch_mm: f64,
-) -> Result<(&'a Tool, &'a Tool, f64), ToolpathError> {
-    let bad = |s: String| Err(ToolpathError::Config(s));
-    machine::program_text("job", &cfg.job).map_err(ToolpathError::Profile)?;
-    let tool = machine.tool(&cfg.tool)?;
-    if !matches!(tool.shape, Shape::Ball { .. }) {
-        return bad(format!(
-            "`tool`: finishing needs a ball-nose tool; `{}` is {:?}",
-            tool.id,
-            tool.shape.kind()
-        ));
-    }
-    let rough = if cfg.rough_tool.is_empty() {
-        tool
-    } else {
-        machine.tool(&cfg.rough_tool)?
-    };
-    let [ax, ay] = cfg.area_mm;
-    if !(ax > 0.0 && ay > 0.0 && ax.is_finite() && ay.is_finite()) {
-        return bad(format!("`area_mm` must be positive, got {ax}×{ay}"));
-    }
-    if ax > machine.travel.x_mm || ay > machine.travel.y_mm {
-        return Err(ToolpathError::Machine(format!(
-            "area {ax}×{ay} mm is larger than the machine's travel.x_mm × travel.y_mm = {}×{} mm",
-            machine.travel.x_mm, machine.travel.y_mm
-        )));
-    }
-    if !(0.0..=MAX_TOLERANCE_UM).contains(&cfg.tolerance_um) {
-        return bad(format!(
-            "`tolerance_um` must be in [0, {MAX_TOLERANCE_UM}] µm, got {}",
-            cfg.tolerance_um
-        ));
-    }
-    if !cfg.angle_deg.is_finite() {
-        return bad(format!("`angle_deg` must be a finite angle, got {}", cfg.angle_deg));
-    }
-    let f = cfg.feed_mm_min;
-    if f != 0.0 && !(f >= MIN_FEED_MM_MIN && f <= machine.limits.max_feed_mm_min) {
-        return bad(format!(
-            "`feed_mm_min` must be 0 (the tool's cutting data) or in [{MIN_FEED_MM_MIN}, {}] mm/min (limits.max_feed_mm_min), got {f}",
-            machine.limits.max_feed_mm_min
-        ));
-    }
-    let stepover = stepover_of(cfg, tool.radius_mm())?;
-    if !(pitch_mm.is_finite() && pitch_mm > 0.0) {
-        return bad(format!("the design grid's pitch must be positive, got {pitch_mm} mm"));
-    }
-    let margin = tool.radius_mm().max(rough.radius_mm()) + 3.0 * pitch_mm;
-    let diag = (ax * ax + ay * ay).sqrt();
-    let side = (diag + 2.0 * margin) / pitch_mm + 2.0;
-    if side * side > MAX_GRID_CELLS {
-        return Err(limit(
-            "tools.diameter_mm / area_mm",
-            format!(
-                "the design grid would be about {:.3e} cells (area plus the tool radius {} mm on each side, at {} mm), above {MAX_GRID_CELLS:.0e}",
-                side * side,
-                tool.radius_mm().max(rough.radius_mm()),
-                pitch_mm
-            ),
-        ));
-    }
-    let passes = diag / stepover + 1.0;
-    if passes * side > MAX_CL_POINTS {
-        let field = if cfg.stepover_mm > 0.0 {
-            "stepover_mm"
-        } else {
-            "scallop_um"
-        };
-        return Err(limit(
-            field,
-            format!(
-                "stepover {stepover:.3e} mm gives about {passes:.3e} passes and {:.3e} CL points, above {MAX_CL_POINTS:.0e}",
-                passes * side
-            ),
-        ));
-    }
-    Ok((tool, rough, stepover))
-}
-
-/// The finishing stepover, mm: `stepover_mm` when given, else the one that leaves `scallop_um` with a ball
-/// of radius `r_mm`.
-fn stepover_of(cfg: &ToolpathConfig, r_mm: f64) -> Result<f64, ToolpathError> {
-    let bad = |s: String| Err(ToolpathError::Config(s));
-    if cfg.stepover_mm > 0.0 && cfg.stepover_mm.is_finite() {
-        Ok(cfg.stepover_mm)
-    } else if cfg.stepover_mm != 0.0 {
-        bad(format!("`stepover_mm` must be ≥ 0 and finite, got {}", cfg.stepover_mm))
-    } else if cfg.scallop_um > 0.0 && cfg.scallop_um * 1e-3 < r_mm {
-        Ok(raster::stepover_for_scallop(r_mm, cfg.scallop_um * 1e-3))
-    } else {
-        bad(format!(
-            "`scallop_um` must be in (0, {}) for this tool, got {}",
-            r_mm * 1000.0,
-            cfg.scallop_um
-        ))
-    }
-}
-
-/// Check the configuration against the machine and the tile; choose the tools, the stepover and the
-/// strategy, and bound the work.
-fn plan<'a>(cfg: &ToolpathConfig, tile: &Heightfield, machine: &'a Machine) -> Result<Plan<'a>, ToolpathError> {
-    let bad = |s: String| Err(ToolpathError::Config(s));
-    let (tool, rough, stepover) = checked(cfg, machine, tile.pitch_mm)?;
-    let [ax, ay] = cfg.area_mm;
-    if !tile.periodic {
-        return bad("the design heightfield must be periodic (a tile) to repeat over the area".into());
-    }
-    let cut = tool.cutting(cfg.stock);
-    let feed = if cfg.feed_mm_min > 0.0 {
-        cfg.feed_mm_min
-    } else {
-        cut.feed_mm_min
-    };
-    let strategy = match cfg.strategy {
-        Strategy::Auto if machine.limits.backlash => Strategy::Oneway,
-        Strategy::Auto => Strategy::Zigzag,
-        s => s,
-    };
-    let p = Plan {
-        tool,
-        rough,
-        area: (ax, ay),
-        stepover,
-        feed,
-        strategy,
-    };
-    bound_work(cfg, tile, &p)?;
-    Ok(p)
-}
-
 /// The finishing tool's CL rows (in parallel), raw (one point per grid column inside the area).
 fn cl_rows(design: &raster::RotatedDesign, dc: &dropcutter::DropCutter, vs: &[f64]) -> Vec<Vec<P3>> {
     vs.par_iter().map(|v| design.pass(dc, *v, |z| z)).collect()
@@ -543,16 +349,25 @@ fn finishing(
     }
 }
 
-/// Build the program for `tile` (periodic, repeated over the area) on `machine`.
+/// Build the program for `tile` (periodic, repeated over the area) on `machine`: [`ToolpathConfig::check`]
+/// for the tile's grid, then [`ToolpathPlan::run`].
 pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Result<Toolpath, ToolpathError> {
-    let Plan {
-        tool,
-        rough,
-        area: (ax, ay),
-        stepover,
-        feed,
-        strategy,
-    } = plan(cfg, tile, machine)?;
+    cfg.check(machine, tile.pitch_mm)?.run(tile)
+}
+
+impl ToolpathPlan {
+    /// Build the program for `tile` (periodic, on the grid the plan was checked for, repeated over the area).
+    pub fn run(&self, tile: &Heightfield) -> Result<Toolpath, ToolpathError> {
+        self.check_tile(tile)?;
+        program(self, tile)
+    }
+}
+
+/// The program of a checked plan.
+fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, ToolpathError> {
+    let (cfg, machine, tool, rough) = (&plan.cfg, &plan.machine, &plan.tool, &plan.rough);
+    let [ax, ay] = cfg.area_mm;
+    let (stepover, feed, strategy) = (plan.stepover_mm, plan.feed_mm_min, plan.strategy);
     let r = tool.radius_mm();
     let cut = tool.cutting(cfg.stock);
     let rough_cut = rough.cutting(cfg.stock);
@@ -611,8 +426,8 @@ pub fn run(cfg: &ToolpathConfig, tile: &Heightfield, machine: &Machine) -> Resul
     let (ramped_entries, plunged_entries) = (b.ramped_entries, b.plunged_entries);
     let moves = b.moves;
 
-    check::check(&moves, start, machine, rough).map_err(ToolpathError::Machine)?;
-    check::check(&moves, start, machine, tool).map_err(ToolpathError::Machine)?;
+    check::check(&moves, start, machine, rough).map_err(|e| ToolpathError::Machine(e.0))?;
+    check::check(&moves, start, machine, tool).map_err(|e| ToolpathError::Machine(e.0))?;
     let est = estimate::estimate(&moves, start, machine, machine.block_rate_limit());
     let len = moves::lengths(&moves, start);
     let (lo, hi) = moves::bounds(&moves, start);

@@ -3,7 +3,8 @@
 //! of cut. [`super::run`] builds it beside the finishing raster, which needs only the CL rows.
 
 use super::build::Builder;
-use super::{limit, link_points, raster, rough, LinkMemo, ToolpathError};
+use super::plan::limit;
+use super::{link_points, raster, rough, LinkMemo, ToolpathError};
 use crate::base::heightfield::Heightfield;
 use crate::cut::dropcutter;
 use crate::cut::machine::{self, Machine, Tool};

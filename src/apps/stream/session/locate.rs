@@ -4,6 +4,7 @@
 //! It refuses, rather than guesses, when the position lies on the path more than once.
 
 use crate::apps::stream::program::{words, Line, MotionMode, Program};
+use crate::base::Invalid;
 use crate::gcode::interp::{Interpreter, Motion};
 use crate::gcode::moves::Arc;
 use crate::gcode::Dialect;
@@ -111,7 +112,7 @@ fn along(l: &Line, a: [f64; 3], b: [f64; 3], p: [f64; 3], arc_tol: f64) -> Optio
 /// them. When a moving line separates two explanations the position alone cannot tell them apart: the
 /// earliest is taken — the resume then starts at the earliest line that may not have run — and
 /// [`Located::ambiguous`] says why. `Err` when the position lies on none of the candidates' path.
-pub fn locate(program: &Program, candidates: &[usize], ev: &Evidence, tol: f64) -> Result<Located, String> {
+pub fn locate(program: &Program, candidates: &[usize], ev: &Evidence, tol: f64) -> Result<Located, Invalid> {
     match ev.ln.map(|l| l as usize).filter(|l| candidates.contains(l)) {
         Some(ln) => locate_named(program, candidates, ln, ev, tol),
         None => locate_by_position(program, candidates, ev, tol),
@@ -120,7 +121,7 @@ pub fn locate(program: &Program, candidates: &[usize], ev: &Evidence, tol: f64) 
 
 /// The controller names the line: every candidate before it ran; where on it motion stopped decides
 /// between complete, not started and cut (which needs no known start point).
-fn locate_named(program: &Program, cands: &[usize], ln: usize, ev: &Evidence, tol: f64) -> Result<Located, String> {
+fn locate_named(program: &Program, cands: &[usize], ln: usize, ev: &Evidence, tol: f64) -> Result<Located, Invalid> {
     let p = ev.position;
     let mut executed: Vec<usize> = cands.iter().copied().filter(|&n| n < ln).collect();
     let l = program
@@ -152,10 +153,10 @@ fn locate_named(program: &Program, cands: &[usize], ln: usize, ev: &Evidence, to
                 }
             }
             _ => {
-                return Err(format!(
+                return Err(Invalid(format!(
                 "the controller reports line {ln} executing but the stop position ({:.3}, {:.3}, {:.3}) is not on it",
                 p[0], p[1], p[2]
-            ))
+            )))
             }
         }
     }
@@ -168,7 +169,7 @@ fn locate_named(program: &Program, cands: &[usize], ln: usize, ev: &Evidence, to
 
 /// No line named: every point of the candidates' path within `tol` of the position is an explanation;
 /// take the furthest, or the earliest (saying why) when a moving line separates two of them.
-fn locate_by_position(program: &Program, cands: &[usize], ev: &Evidence, tol: f64) -> Result<Located, String> {
+fn locate_by_position(program: &Program, cands: &[usize], ev: &Evidence, tol: f64) -> Result<Located, Invalid> {
     let p = ev.position;
     let consistent = explanations(program, cands, ev, tol)?;
     if cands.is_empty() {
@@ -179,13 +180,13 @@ fn locate_by_position(program: &Program, cands: &[usize], ev: &Evidence, tol: f6
         });
     }
     if consistent.is_empty() {
-        return Err(format!(
+        return Err(Invalid(format!(
             "the stop position ({:.3}, {:.3}, {:.3}) lies on none of lines {:?}",
             p[0],
             p[1],
             p[2],
             &cands[..cands.len().min(8)]
-        ));
+        )));
     }
     let cmp = |x: &(usize, f64, [f64; 3]), y: &(usize, f64, [f64; 3])| x.0.cmp(&y.0).then(x.1.total_cmp(&y.1));
     let lo = *consistent.iter().min_by(|x, y| cmp(x, y)).expect("non-empty");

@@ -185,7 +185,7 @@ fn catmull_rom(t: f64) -> ([f64; 4], [f64; 4]) {
 impl OpticalSurface {
     /// From a heightfield (mm), after checking it.
     pub fn new(hf: &Heightfield) -> Result<Self, WaveError> {
-        hf.check_invariants().map_err(WaveError::Heightfield)?;
+        hf.check_invariants().map_err(|e| WaveError::Heightfield(e.0))?;
         if hf.nx < 4 || hf.ny < 4 {
             return Err(WaveError::Heightfield(format!(
                 "needs at least 4×4 samples, got {}×{}",

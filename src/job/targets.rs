@@ -1,0 +1,230 @@
+//! The job's targets: its one target (`[target]`) or each region's (`[[svbrdf.region]]`), their specs read and
+//! checked when the job loads; the label image of a spatially varying target; and the MERL file a job may ask
+//! to be written from a model (`target.merl_from`), which the run writes, never the loading.
+
+use super::{resolve_spec, Job, TargetSection};
+use crate::base::Invalid;
+use crate::stages::brdf::{Brdf, Merl, Model};
+use crate::stages::svbrdf::{Labels, SvbrdfSection};
+use std::path::{Path, PathBuf};
+
+/// One target of a job, ready to run: the job's own (named `""`, files `ndf.json`, `tile.*`) or a region's
+/// (files `ndf-NAME.json`, `tile-NAME.*`).
+#[derive(Clone, Debug)]
+pub struct RegionTarget {
+    /// Its name (empty for a job's single target).
+    pub name: String,
+    /// Its label colour (regions only).
+    pub color: [u8; 3],
+    /// The target spec as resolved.
+    pub spec: String,
+    /// The target.
+    pub target: Brdf,
+}
+
+impl RegionTarget {
+    /// The suffix of its files: `""` for a single target, `-NAME` for a region.
+    #[must_use]
+    pub fn suffix(&self) -> String {
+        if self.name.is_empty() {
+            String::new()
+        } else {
+            format!("-{}", self.name)
+        }
+    }
+}
+
+/// `target.merl_from` for a `merl:` file that does not exist yet: the run writes it from `source` before the
+/// NDF stage and reads the target back from it.
+#[derive(Clone, Debug)]
+pub struct MerlFrom {
+    /// The file `target.brdf` names.
+    pub path: PathBuf,
+    /// The spec it is written from.
+    pub from: String,
+    /// That spec's model.
+    pub source: Brdf,
+}
+
+impl MerlFrom {
+    /// Write the file, and read it back as the target (with the spec's `material=` and other options).
+    pub fn write(&self, spec: &str) -> Result<(Brdf, String), Invalid> {
+        Merl::from_fn(|wi, wo| self.source.eval(wi, wo))
+            .write(&self.path)
+            .map_err(|e| Invalid(e.to_string()))?;
+        let target = Brdf::parse(spec).map_err(|e| Invalid(format!("`target.brdf`: {e}")))?;
+        Ok((
+            target,
+            format!(
+                "wrote {} from `{}` (`target.merl_from`)",
+                self.path.display(),
+                self.from
+            ),
+        ))
+    }
+}
+
+/// The job's single target, and the MERL file the run must write first when `target.merl_from` asks for one
+/// that does not exist (the target is then the model it is written from until the run has read the file).
+pub(super) fn single_target(t: &TargetSection, dir: &Path) -> Result<(RegionTarget, Option<MerlFrom>), String> {
+    let (key, spec) = target_spec(
+        "target",
+        (&t.brdf, &t.highlight, t.highlight_extent_deg, &t.material),
+        dir,
+    )?;
+    let merl = match &t.merl_from {
+        None => None,
+        Some(from) => {
+            let Some(rest) = spec.strip_prefix("merl:") else {
+                return Err(format!(
+                    "`target.merl_from`: only a `merl:` target can be written from a spec; `target.brdf` is `{}`",
+                    t.brdf
+                ));
+            };
+            let path = PathBuf::from(rest.split(',').next().unwrap_or(rest).trim());
+            let source = Brdf::parse(from).map_err(|e| format!("`target.merl_from`: {e}"))?;
+            if matches!(source.model, Model::Merl(_)) {
+                return Err(format!(
+                    "`target.merl_from`: `{from}` is itself a MERL file: name an analytic or measured model"
+                ));
+            }
+            (!path.exists()).then(|| MerlFrom {
+                path,
+                from: from.clone(),
+                source,
+            })
+        }
+    };
+    let target = match &merl {
+        Some(m) => m.source.clone(),
+        None => Brdf::parse(&spec).map_err(|e| format!("`{key}`: {e}"))?,
+    };
+    let single = RegionTarget {
+        name: String::new(),
+        color: [0; 3],
+        spec,
+        target,
+    };
+    Ok((single, merl))
+}
+
+/// The fields that name a target: a BRDF spec, or a highlight with its extent and material.
+type TargetFields<'a> = (&'a String, &'a Option<String>, Option<f64>, &'a Option<String>);
+
+/// A target's BRDF spec, from `SECTION.brdf` or from `SECTION.highlight` (with its extent and material), and
+/// the key it came from. Exactly one of the two must be given; the highlight's keys only go with it.
+fn target_spec(
+    section: &str,
+    (brdf, highlight, extent, material): TargetFields,
+    dir: &Path,
+) -> Result<(String, String), String> {
+    match (highlight, brdf.trim().is_empty()) {
+        (Some(_), false) => Err(format!("give `{section}.brdf` or `{section}.highlight`, not both")),
+        (None, true) => Err(format!(
+            "missing `{section}.brdf` (a BRDF spec) or `{section}.highlight` (a PNG)"
+        )),
+        (None, false) => {
+            for (key, given) in [
+                ("highlight_extent_deg", extent.is_some()),
+                ("material", material.is_some()),
+            ] {
+                if given {
+                    return Err(format!(
+                        "`{section}.{key}` goes with `{section}.highlight`; with `{section}.brdf` give the material in the spec (`…,material=NAME`)"
+                    ));
+                }
+            }
+            Ok((format!("{section}.brdf"), resolve_spec(brdf, dir)))
+        }
+        (Some(path), true) => {
+            let spec = crate::stages::brdf::highlight::spec(path, extent, material.as_deref())
+                .map_err(|e| format!("`{section}.highlight`: {e}"))?;
+            Ok((format!("{section}.highlight"), resolve_spec(&spec, dir)))
+        }
+    }
+}
+
+/// `[[svbrdf.region]]` → each region's target, with names and colours checked (valid, distinct). With
+/// regions, `[target]` gives no target of its own (only `base` and `polish`).
+pub(super) fn region_targets(t: &TargetSection, sv: &SvbrdfSection, dir: &Path) -> Result<Vec<RegionTarget>, String> {
+    if !t.brdf.trim().is_empty() || t.highlight.is_some() || t.material.is_some() || t.highlight_extent_deg.is_some() {
+        return Err(
+            "with `[svbrdf]` each `[[svbrdf.region]]` names its own target: leave `target.brdf`, `target.highlight` and their keys out (`[target]` keeps `base` and `polish`)".into(),
+        );
+    }
+    if t.merl_from.is_some() {
+        return Err("`target.merl_from` does not go with `[svbrdf]`".into());
+    }
+    if sv.region.len() < 2 {
+        return Err(format!(
+            "`[svbrdf]` needs at least two `[[svbrdf.region]]` (got {}); a single target goes in `[target]`",
+            sv.region.len()
+        ));
+    }
+    if sv.region.len() > crate::stages::svbrdf::MAX_REGIONS {
+        return Err(format!(
+            "`[svbrdf]` has {} regions; at most {}",
+            sv.region.len(),
+            crate::stages::svbrdf::MAX_REGIONS
+        ));
+    }
+    let mut out: Vec<RegionTarget> = vec![];
+    for (k, r) in sv.region.iter().enumerate() {
+        let section = format!("svbrdf.region[{}]", k + 1);
+        crate::stages::svbrdf::check_name(&r.name).map_err(|e| format!("`{section}.name`: {e}"))?;
+        let color = crate::stages::svbrdf::parse_color(&r.color).map_err(|e| format!("`{section}.color`: {e}"))?;
+        if let Some(o) = out.iter().find(|o| o.name == r.name) {
+            return Err(format!("`{section}.name`: `{}` is already a region's name", o.name));
+        }
+        if let Some(o) = out.iter().find(|o| o.color == color) {
+            return Err(format!(
+                "`{section}.color`: {} is already region `{}`'s colour",
+                crate::stages::svbrdf::hex(color),
+                o.name
+            ));
+        }
+        let (key, spec) = target_spec(
+            &section,
+            (&r.brdf, &r.highlight, r.highlight_extent_deg, &r.material),
+            dir,
+        )?;
+        let target = Brdf::parse(&spec).map_err(|e| format!("`{key}`: {e}"))?;
+        out.push(RegionTarget {
+            name: r.name.clone(),
+            color,
+            spec,
+            target,
+        });
+    }
+    Ok(out)
+}
+
+/// Read the label image of `[svbrdf]` against its regions and the work area, and refuse a region too small
+/// to hold one tile period.
+pub(super) fn read_labels(
+    job: &Job,
+    sv: &SvbrdfSection,
+    regions: &[RegionTarget],
+    dir: &Path,
+) -> Result<Labels, String> {
+    let f = &job.facets;
+    let [ax, ay] = job.toolpath.area_mm;
+    let pitch_mm = f.pitch_um * 1e-3;
+    let cells = (ax / pitch_mm).round() * (ay / pitch_mm).round();
+    if cells > crate::stages::svbrdf::MAX_PART_CELLS as f64 {
+        return Err(format!(
+            "`[svbrdf]`: the composed part would be {cells:.0} cells (`toolpath.area_mm` = [{ax}, {ay}] at `facets.pitch_um` = {}); at most {}",
+            f.pitch_um,
+            crate::stages::svbrdf::MAX_PART_CELLS
+        ));
+    }
+    let path = dir.join(&sv.labels);
+    let names: Vec<String> = regions.iter().map(|r| r.name.clone()).collect();
+    let colors: Vec<[u8; 3]> = regions.iter().map(|r| r.color).collect();
+    let labels =
+        Labels::read(&path, &names, &colors, job.toolpath.area_mm).map_err(|e| format!("`svbrdf.labels`: {e}"))?;
+    labels
+        .check_period([f.facets_x as f64 * f.facet_mm, f.facets_y as f64 * f.facet_mm])
+        .map_err(|e| format!("`svbrdf.region`: {e}"))?;
+    Ok(labels)
+}
