@@ -9,7 +9,7 @@
 //!
 //! Rows are computed as a sum of 1D passes: for each design row within `r` of the output row, the run of
 //! column offsets `dx` within the circle is one max-plus correlation of that row with `b(dx, dy)`
-//! ([`crate::cut::morphology::max_plus`], sixteen outputs at a time in registers, with the CPU's widest vector
+//! (`crate::cut::morphology::max_plus`, sixteen outputs at a time in registers, with the CPU's widest vector
 //! instructions), and output rows run in parallel with rayon.
 
 use crate::base::heightfield::Heightfield;

@@ -5,9 +5,9 @@
 //! reaches into a later one for these.
 
 pub mod dropcutter;
-pub mod estimate;
+pub(crate) mod estimate;
 pub mod machine;
-pub mod morphology;
-pub mod stock;
+pub(crate) mod morphology;
+pub(crate) mod stock;
 pub mod sweep;
 pub mod tool;

@@ -2,17 +2,17 @@
 //! again and again against a model of what the finishing ball will cut, until the *as-milled* surface, not
 //! the design tile, matches the target (DESIGN.md §3.1).
 //!
-//! Each round: facets from the current aim → the tile's as-milled model ([`model`]: the ball's opening of
+//! Each round: facets from the current aim → the tile's as-milled model (`model`: the ball's opening of
 //! the periodic tile, its NDF convolved with the scallop lobe) → its figures against the target's observed
 //! distribution (correlation, L1, slope variances within the machinable cone) → a multiplicative
-//! correction of the aim ([`update`]). The loop stops when the model meets the tolerances with a margin, or
+//! correction of the aim (`update`). The loop stops when the model meets the tolerances with a margin, or
 //! after `rounds`; the round whose model scores best is the design. Before the first round,
 //! `arrangements` candidate arrangements of the same facets (different annealing seeds) are modelled and the
 //! best-scoring one is the one the rounds correct. Lucy–Richardson, the CVT and Eqs. 17–21
 //! stay the core: this is a loop around them. The final verdict still comes from simulating the G-code.
 
-pub mod model;
-pub mod update;
+pub(crate) mod model;
+pub(crate) mod update;
 
 use crate::base::distance::correlation;
 use crate::base::slope::SlopeGrid;

@@ -5,7 +5,7 @@
 //!    dropped from the density (or clamped), and the mass that removed is reported.
 //! 2. `arrange`: the facets placed on a W×H cyclic grid by simulated annealing of `E = C + I + V`.
 //! 3. `poisson`: facet heights by periodic Poisson integration (FFT), then the facet planes rasterised at
-//!    a fine pitch into a periodic [`Heightfield`]; [`stl`] writes the exact faceted solid.
+//!    a fine pitch into a periodic [`Heightfield`]; `stl` writes the exact faceted solid.
 //!
 //! ```
 //! use brdfmill::stages::{brdf::Brdf, facets, ndf};
@@ -23,7 +23,7 @@ pub(crate) mod poisson;
 pub(crate) mod relief;
 pub(crate) mod sampling;
 pub(crate) mod steps;
-pub mod stl;
+pub(crate) mod stl;
 
 pub use arrange::{AnnealConfig, AnnealReport, Arrangement, Energy};
 pub use format::TileFile;

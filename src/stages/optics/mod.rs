@@ -5,6 +5,6 @@
 //! - [`wave`]: the Kirchhoff wave BRDF (Table 1, Eqs. 1–4) over a Gaussian coherence area, by FFT over a
 //!   whole slice and by Gabor kernels per direction (Eqs. 7–16); the scallop diffraction warning.
 
-pub mod figures;
+pub(crate) mod figures;
 pub mod geometric;
 pub mod wave;

@@ -5,7 +5,7 @@
 //!   (chord sagitta).
 //! - The machining layer sweeps them: [`crate::cut::sweep`] (the lowest point of a ball, flat or bull bit
 //!   swept along one straight segment, in closed form for ball and flat, a certified 1 pm bound for the
-//!   bull) over [`crate::cut::stock`] (the stock heightfield in tiles, swept in parallel with rayon).
+//!   bull) over `crate::cut::stock` (the stock heightfield in tiles, swept in parallel with rayon).
 //! - [`deviation`](mod@deviation): the simulated surface against the design tile, and where the bit cannot reach.
 //!
 //! The stock is a non-periodic grid of `pitch_um` over the program's cutting extents plus the tool radius

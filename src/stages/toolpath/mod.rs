@@ -1,7 +1,7 @@
 //! Stage 4 — toolpath: a heightfield (typically the periodic facet tile) to a G-code program.
 //!
 //! - The machining layer supplies the machine profiles ([`crate::cut::machine`]), the exact cutter-location
-//!   surface ([`crate::cut::dropcutter`]) and the run-time planner ([`crate::cut::estimate`]).
+//!   surface ([`crate::cut::dropcutter`]) and the run-time planner (`crate::cut::estimate`).
 //! - `raster`: raster passes at any angle over the tile repeated across the work area.
 //! - `simplify`: one-sided removal of collinear points within a stated tolerance; `arcs`: `G2`/`G3` in the
 //!   pass plane (`G18`, `G19`) where a run of blocks lies on one circle, one-sided within it.

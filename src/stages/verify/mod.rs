@@ -12,9 +12,9 @@
 //! - `report`: the single-page offline HTML report.
 
 pub(crate) mod explain;
-pub mod highlight;
+pub(crate) mod highlight;
 pub(crate) mod metrics;
-pub mod milled;
+pub(crate) mod milled;
 pub mod regions;
 pub(crate) mod render;
 pub(crate) mod report;

@@ -12,7 +12,7 @@
 //!   the single-target measurement (mean over one stepover across the passes, scallop lobe put back).
 //! - **Every point of the tile alike.** A region's shape holds parts of its tiles unequally (a strip of
 //!   the field above a logo holds some facet rows and not others), which weights facets unequally just as
-//!   a window of part of a tile would ([`super::milled`]): on the example's field the unweighted y variance
+//!   a window of part of a tile would (`super::milled`): on the example's field the unweighted y variance
 //!   ratio came out 0.85 where the balanced one is 0.97. So each measured cell is weighted by one over the
 //!   number of measured cells at its tile phase (its position modulo the period); a region that holds one
 //!   whole period clear of its border (the load checks one on the label image) holds every phase. The
@@ -188,124 +188,27 @@ pub fn run(cfg: &VerifyConfig, input: &RegionsInput) -> Result<(RegionsMetrics, 
         .map(|d| d * p)
         .collect();
     let seam_mm = 2.0 * input.tool_radius_mm + reach_mm;
-    let light = light_dirs();
-    let fractions = input.labels.fractions();
+    let ctx = Shared {
+        cfg,
+        input,
+        label: &label,
+        edge_mm: &edge_mm,
+        cells,
+        slopes: &slopes,
+        reach_mm,
+        reference_mm,
+        cone_tan,
+        seam_mm,
+        light: light_dirs(),
+        fractions: input.labels.fractions(),
+    };
     let mut out = vec![];
     let mut notes = vec![];
     let mut figures = vec![];
     for (k, r) in input.regions.iter().enumerate() {
-        // distance to the other regions (not the area's edge: the border is where two regions meet)
-        let dist: Vec<f64> = distance_to_outside(
-            &label
-                .iter()
-                .map(|&l| l as usize != k && l != OUTSIDE)
-                .collect::<Vec<_>>(),
-            nx,
-            ny,
-        )
-        .into_iter()
-        .map(|d| d * p)
-        .collect();
-        let (profile, interior) = border_profile(&dist, &edge_mm, seam_mm, &label, k, input.deviation, reference_mm);
-        let border_mm = border_width(&profile, interior);
-        let excluded_mm = border_mm + reach_mm;
-        let inside = |i: usize, j: usize| {
-            let c = (j + cells[1]) * nx + i + cells[0];
-            label[c] as usize == k && dist[c] >= excluded_mm && edge_mm[c] >= seam_mm
-        };
-        // the region's measured cells, each weighted by 1 / (cells of its tile phase), so every point of the
-        // tile counts alike whatever part of the tiles the region's shape holds (module notes)
-        let t = &r.tile.heightfield;
-        let (mut mine, mut phase) = (vec![], vec![]);
-        for (c, s) in slopes.iter().enumerate() {
-            let (i, j) = (c % cells[2], c / cells[2]);
-            if inside(i, j) {
-                let x = ox + (i + cells[0]) as f64 * p + 0.5 * p;
-                let y = oy + (j + cells[1]) as f64 * p + 0.5 * p;
-                let u = ((x / t.pitch_mm).floor() as i64).rem_euclid(t.nx as i64) as usize;
-                let v = ((y / t.pitch_mm).floor() as i64).rem_euclid(t.ny as i64) as usize;
-                mine.push(*s);
-                phase.push(v * t.nx + u);
-            }
-        }
-        if mine.is_empty() {
-            return Err(VerifyError::Region(format!(
-                "region `{}` has no cell {excluded_mm:.2} mm from the other regions and inside the stock's edge band: nothing of it can be measured",
-                r.name
-            )));
-        }
-        let mut count = vec![0u32; t.nx * t.ny];
-        for &ph in &phase {
-            count[ph] += 1;
-        }
-        let phase_coverage = count.iter().filter(|&&c| c > 0).count() as f64 / count.len() as f64;
-        let weights: Vec<f64> = phase.iter().map(|&ph| 1.0 / count[ph] as f64).collect();
-        let domain = r.ndf.config.domain();
-        let convolved = |w: Option<&[f64]>| {
-            let (raw, _) = surface::ndf_of_weighted_slopes(&mine, w, domain);
-            let mut g = input.scallop.convolve(&raw);
-            g.normalise();
-            g
-        };
-        let milled = convolved(Some(&weights));
-        let as_seen = metrics::measure(&r.ndf.observed, &convolved(None), r.target, &[], &tol, cone_tan);
-        let [lo, hi] = tol.cov_ratio;
-        if as_seen.cov_ratio.iter().any(|v| *v < lo || *v > hi) {
-            notes.push(format!(
-                "Region `{}` as seen (its cells unweighted) has slope variance ratio [{:.3}, {:.3}], outside [{lo}, {hi}]: its shape holds some parts of its tiles more than others; a region several tile periods across averages this out.",
-                r.name, as_seen.cov_ratio[0], as_seen.cov_ratio[1]
-            ));
-        }
-        let design = super::run::design_ndf(r.tile, input.base, domain);
-        let mut design_m = metrics::measure(&r.ndf.observed, &design, r.target, &cfg.incident_deg, &tol, cone_tan);
-        let mut milled_m = metrics::measure(&r.ndf.observed, &milled, r.target, &cfg.incident_deg, &tol, cone_tan);
-        if let Some(h) = r.target.highlight() {
-            let c = super::highlight::compare(h, r.ndf, &design, &milled, &mut design_m, &mut milled_m, &tol);
-            figures.push(Figure {
-                title: format!("Region `{}`: highlight", r.name),
-                ..c.figure
-            });
-        }
-        // a region whose measured cells miss some points of its tile cannot show the tile's distribution
-        // (the design tile holds every point of itself: its row reads 1, so both columns line up)
-        for (m, v) in [(&mut design_m, 1.0), (&mut milled_m, phase_coverage)] {
-            m.checks.push(metrics::Check {
-                name: "tile points measured (phase coverage)".into(),
-                value: v,
-                tolerance: "= 1 (every point of the tile clear of the border)".into(),
-                pass: v >= 1.0,
-            });
-            m.pass = m.checks.iter().all(|c| c.pass);
-        }
-        for c in milled_m.checks.iter().filter(|c| !c.pass) {
-            notes.push(format!(
-                "Region `{}`: {} = {:.4} (needs {}).",
-                r.name, c.name, c.value, c.tolerance
-            ));
-        }
-        let radiance = region_radiance(hf, cells, &light, input.polish_alpha, inside);
-        let measured_cells = mine.len();
-        let as_seen_cov_ratio = as_seen.cov_ratio;
-        figures.push(region_ndfs(r, &r.ndf.observed, &milled));
-        out.push(RegionMetrics {
-            name: r.name.to_string(),
-            color: hex(input.labels.colors[k]),
-            target: r.spec.to_string(),
-            area_fraction: fractions[k],
-            border_mm,
-            excluded_mm,
-            measured_cells,
-            measured_mm2: measured_cells as f64 * p * p,
-            interior_deviation_um: interior,
-            border_profile: profile,
-            light_radiance: radiance,
-            phase_coverage,
-            as_seen_cov_ratio,
-            pass: milled_m.pass,
-            design: design_m,
-            milled: milled_m,
-        });
+        out.push(region(&ctx, k, r, &mut notes, &mut figures)?);
     }
+    let light = ctx.light;
     let strip = light_strip(hf, cells, &light, input.polish_alpha);
     let mut all = vec![
         Figure::new(
@@ -347,6 +250,163 @@ pub fn run(cfg: &VerifyConfig, input: &RegionsInput) -> Result<(RegionsMetrics, 
         },
         all,
     ))
+}
+
+/// What every region's measurement shares: the label of each simulated cell, the distance to the work
+/// area's edge, the measured window and its stepover slopes, and the bands and light of the figures.
+struct Shared<'a> {
+    cfg: &'a VerifyConfig,
+    input: &'a RegionsInput<'a>,
+    label: &'a [u8],
+    edge_mm: &'a [f64],
+    cells: [usize; 4],
+    slopes: &'a [(f64, f64)],
+    reach_mm: f64,
+    reference_mm: f64,
+    cone_tan: f64,
+    seam_mm: f64,
+    light: Vec<[f64; 3]>,
+    fractions: Vec<f64>,
+}
+
+/// Region `k` against its own target away from its border (phase-weighted), its border profile and
+/// radiance under the moving light; a failing check's reason goes to `notes`, its figures to `figures`.
+fn region(
+    ctx: &Shared,
+    k: usize,
+    r: &RegionInput,
+    notes: &mut Vec<String>,
+    figures: &mut Vec<Figure>,
+) -> Result<RegionMetrics, VerifyError> {
+    let Shared {
+        cfg,
+        input,
+        label,
+        edge_mm,
+        cells,
+        slopes,
+        reach_mm,
+        reference_mm,
+        cone_tan,
+        seam_mm,
+        ..
+    } = *ctx;
+    let (light, fractions) = (&ctx.light, &ctx.fractions);
+    let tol = cfg.tolerances;
+    let hf = &input.sim.heightfield;
+    let (nx, ny, p) = (hf.nx, hf.ny, hf.pitch_mm);
+    let [ox, oy] = input.sim.origin_mm;
+    // distance to the other regions (not the area's edge: the border is where two regions meet)
+    let dist: Vec<f64> = distance_to_outside(
+        &label
+            .iter()
+            .map(|&l| l as usize != k && l != OUTSIDE)
+            .collect::<Vec<_>>(),
+        nx,
+        ny,
+    )
+    .into_iter()
+    .map(|d| d * p)
+    .collect();
+    let (profile, interior) = border_profile(&dist, edge_mm, seam_mm, label, k, input.deviation, reference_mm);
+    let border_mm = border_width(&profile, interior);
+    let excluded_mm = border_mm + reach_mm;
+    let inside = |i: usize, j: usize| {
+        let c = (j + cells[1]) * nx + i + cells[0];
+        label[c] as usize == k && dist[c] >= excluded_mm && edge_mm[c] >= seam_mm
+    };
+    // the region's measured cells, each weighted by 1 / (cells of its tile phase), so every point of the
+    // tile counts alike whatever part of the tiles the region's shape holds (module notes)
+    let t = &r.tile.heightfield;
+    let (mut mine, mut phase) = (vec![], vec![]);
+    for (c, s) in slopes.iter().enumerate() {
+        let (i, j) = (c % cells[2], c / cells[2]);
+        if inside(i, j) {
+            let x = ox + (i + cells[0]) as f64 * p + 0.5 * p;
+            let y = oy + (j + cells[1]) as f64 * p + 0.5 * p;
+            let u = ((x / t.pitch_mm).floor() as i64).rem_euclid(t.nx as i64) as usize;
+            let v = ((y / t.pitch_mm).floor() as i64).rem_euclid(t.ny as i64) as usize;
+            mine.push(*s);
+            phase.push(v * t.nx + u);
+        }
+    }
+    if mine.is_empty() {
+        return Err(VerifyError::Region(format!(
+            "region `{}` has no cell {excluded_mm:.2} mm from the other regions and inside the stock's edge band: nothing of it can be measured",
+            r.name
+        )));
+    }
+    let mut count = vec![0u32; t.nx * t.ny];
+    for &ph in &phase {
+        count[ph] += 1;
+    }
+    let phase_coverage = count.iter().filter(|&&c| c > 0).count() as f64 / count.len() as f64;
+    let weights: Vec<f64> = phase.iter().map(|&ph| 1.0 / count[ph] as f64).collect();
+    let domain = r.ndf.config.domain();
+    let convolved = |w: Option<&[f64]>| {
+        let (raw, _) = surface::ndf_of_weighted_slopes(&mine, w, domain);
+        let mut g = input.scallop.convolve(&raw);
+        g.normalise();
+        g
+    };
+    let milled = convolved(Some(&weights));
+    let as_seen = metrics::measure(&r.ndf.observed, &convolved(None), r.target, &[], &tol, cone_tan);
+    let [lo, hi] = tol.cov_ratio;
+    if as_seen.cov_ratio.iter().any(|v| *v < lo || *v > hi) {
+        notes.push(format!(
+            "Region `{}` as seen (its cells unweighted) has slope variance ratio [{:.3}, {:.3}], outside [{lo}, {hi}]: its shape holds some parts of its tiles more than others; a region several tile periods across averages this out.",
+            r.name, as_seen.cov_ratio[0], as_seen.cov_ratio[1]
+        ));
+    }
+    let design = super::run::design_ndf(r.tile, input.base, domain);
+    let mut design_m = metrics::measure(&r.ndf.observed, &design, r.target, &cfg.incident_deg, &tol, cone_tan);
+    let mut milled_m = metrics::measure(&r.ndf.observed, &milled, r.target, &cfg.incident_deg, &tol, cone_tan);
+    if let Some(h) = r.target.highlight() {
+        let c = super::highlight::compare(h, r.ndf, &design, &milled, &mut design_m, &mut milled_m, &tol);
+        figures.push(Figure {
+            title: format!("Region `{}`: highlight", r.name),
+            ..c.figure
+        });
+    }
+    // a region whose measured cells miss some points of its tile cannot show the tile's distribution
+    // (the design tile holds every point of itself: its row reads 1, so both columns line up)
+    for (m, v) in [(&mut design_m, 1.0), (&mut milled_m, phase_coverage)] {
+        m.checks.push(metrics::Check {
+            name: "tile points measured (phase coverage)".into(),
+            value: v,
+            tolerance: "= 1 (every point of the tile clear of the border)".into(),
+            pass: v >= 1.0,
+        });
+        m.pass = m.checks.iter().all(|c| c.pass);
+    }
+    for c in milled_m.checks.iter().filter(|c| !c.pass) {
+        notes.push(format!(
+            "Region `{}`: {} = {:.4} (needs {}).",
+            r.name, c.name, c.value, c.tolerance
+        ));
+    }
+    let radiance = region_radiance(hf, cells, light, input.polish_alpha, inside);
+    let measured_cells = mine.len();
+    let as_seen_cov_ratio = as_seen.cov_ratio;
+    figures.push(region_ndfs(r, &r.ndf.observed, &milled));
+    Ok(RegionMetrics {
+        name: r.name.to_string(),
+        color: hex(input.labels.colors[k]),
+        target: r.spec.to_string(),
+        area_fraction: fractions[k],
+        border_mm,
+        excluded_mm,
+        measured_cells,
+        measured_mm2: measured_cells as f64 * p * p,
+        interior_deviation_um: interior,
+        border_profile: profile,
+        light_radiance: radiance,
+        phase_coverage,
+        as_seen_cov_ratio,
+        pass: milled_m.pass,
+        design: design_m,
+        milled: milled_m,
+    })
 }
 
 /// Mean `|sim − design|` per [`BAND_MM`] band of distance from the other regions, over region `k`'s assessed
