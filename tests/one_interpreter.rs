@@ -25,7 +25,7 @@ fn simulator(text: &str) -> Ends {
 }
 
 /// The virtual controller's reading: each block sent alone with its line number and run to its end (a pause
-/// resumed with a cycle start); the end of each line's last executed piece.
+/// resumed with cycle starts); the end of each line's last executed piece.
 fn controller(text: &str) -> Ends {
     let mut c = Controller::new(&EmulatorConfig {
         // faster axes, so long programs run in few simulated minutes; soft limits off (the default)
@@ -53,8 +53,10 @@ fn controller(text: &str) -> Ends {
             if out.contains("ok") || out.contains("error") || out.contains("ALARM") {
                 break;
             }
-            if step == 10 && block.contains("M0") {
-                c.receive(b'~'); // cycle start after the pause
+            // M0 waits for the motion before it to finish, then holds; a cycle start sent while that motion
+            // runs is ignored (as GRBL does), so it is repeated until the pause is over
+            if step % 10 == 9 && block.contains("M0") {
+                c.receive(b'~');
             }
         }
         assert!(

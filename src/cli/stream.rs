@@ -9,7 +9,7 @@ use std::time::Duration;
 use anyhow::{bail, Context, Result};
 use brdfmill::apps::stream::program::Program;
 use brdfmill::apps::stream::serial::{SerialLink, DEFAULT_BAUD};
-use brdfmill::apps::stream::session::{self, Config, Mode, Observer, Outcome, Progress};
+use brdfmill::apps::stream::session::{self, Config, Mode, Observer, Outcome, Progress, StopReason};
 
 /// Arguments of `brdfmill stream`.
 #[derive(clap::Args, Debug)]
@@ -46,6 +46,13 @@ pub struct Args {
     /// On resume, unlock ($X) a controller in alarm even when the journal does not show the position was kept.
     #[arg(long)]
     pub unlock: bool,
+    /// On resume after the controller restarted: you re-established its position (homed, or set the work
+    /// coordinates of where the tool stands), so its report is the truth again.
+    #[arg(long)]
+    pub position_reestablished: bool,
+    /// On resume: leave out line N, which GRBL rejected (error:N), on purpose (journaled; repeatable).
+    #[arg(long = "skip-line", value_name = "N")]
+    pub skip_line: Vec<usize>,
     /// Do not prefix blocks with N line numbers (status reports then cannot name the executing line).
     #[arg(long)]
     pub no_line_numbers: bool,
@@ -118,8 +125,13 @@ pub fn run(a: &Args) -> Result<()> {
         spindle_dwell_s: a.spindle_dwell_s,
         plunge_feed_mm_min: a.plunge_feed_mm_min,
         unlock: a.unlock,
+        position_reestablished: a.position_reestablished,
+        skip_lines: a.skip_line.clone(),
         ..Config::default()
     };
+    if !a.resume && (a.position_reestablished || !a.skip_line.is_empty()) {
+        bail!("--position-reestablished and --skip-line go with --resume");
+    }
     if !(cfg.safe_z_mm.is_finite() && cfg.spindle_dwell_s >= 0.0 && cfg.plunge_feed_mm_min > 0.0) {
         bail!("--safe-z-mm must be finite, --spindle-dwell-s ≥ 0 and --plunge-feed-mm-min > 0");
     }
@@ -192,14 +204,23 @@ pub fn run(a: &Args) -> Result<()> {
         }
         Outcome::Stopped(r, _) => {
             let at = r.line.map_or(String::new(), |l| format!(" at line {l}"));
-            let resume = match (r.located, r.resume_line) {
-                (true, Some(l)) => format!(
+            let resume = match (r.located, r.resume_line, &r.reason, r.line) {
+                (true, Some(_), StopReason::Error(_), Some(bad)) => format!(
+                    "; {} lines done. GRBL rejected line {bad}: fix the program and start the job over, or resume \
+                     without that line, on purpose, with: brdfmill stream {} --port {} --resume --skip-line {bad}",
+                    r.lines_done,
+                    a.program.display(),
+                    a.port.display()
+                ),
+                (true, Some(l), _, _) => format!(
                     "; {} lines done, resume from line {l} with: brdfmill stream {} --port {} --resume",
                     r.lines_done,
                     a.program.display(),
                     a.port.display()
                 ),
-                (false, _) => "; which lines ran is not known yet: --resume will read the controller's position".into(),
+                (false, ..) => {
+                    "; which lines ran is not known yet: --resume will read the controller's position".into()
+                }
                 _ => String::new(),
             };
             bail!("job stopped{at}: {}{resume} (journal {})", r.message, journal.display())

@@ -277,7 +277,7 @@ impl Program {
             });
         }
         let mut interp = Interpreter::unknown_frame(Dialect::Grbl, [None; 3]);
-        let mut lines = Vec::with_capacity(src.len());
+        let mut lines: Vec<Line> = Vec::with_capacity(src.len());
         // where the program ended, as the simulator reads it: `M2`/`M30`, or a `%` after content (a first
         // `%` before any is the start mark)
         let mut end: Option<(usize, &str)> = None;
@@ -337,7 +337,6 @@ impl Program {
                     .any(|w| w.letter == 'G' && (same(w.value, 10.0) || same(w.value, 28.1) || same(w.value, 30.1)));
                 (if setting { LineKind::Setting } else { LineKind::Gcode }, block)
             };
-            let pos = interp.work_position();
             let mut line = Line {
                 number,
                 source: (*s).to_string(),
@@ -345,25 +344,18 @@ impl Program {
                 kind,
                 before: interp.modal,
                 after: interp.modal,
-                start_mm: pos,
-                end_mm: pos,
+                start_mm: [None; 3],
+                end_mm: [None; 3],
                 moves: false,
                 motion: None,
                 breaks_position: false,
                 refusal: None,
             };
-            if kind != LineKind::Empty && !line.block.starts_with('$') {
-                let ws = words(&line.block).map_err(|e| syntax(e.to_string()))?;
-                model(&mut interp, &ws, &mut line);
-                match line.program_flow() {
-                    Some(2) => end = Some((number, "`M2`")),
-                    Some(30) => end = Some((number, "`M30`")),
-                    _ => {}
-                }
-            } else if kind == LineKind::System && (line.block == "$H" || line.block.starts_with("$J")) {
-                line.breaks_position = true;
-                interp.known = [false; 3];
-                line.end_mm = interp.work_position();
+            annotate(&mut interp, &mut line).map_err(|e| syntax(e.to_string()))?;
+            match line.program_flow() {
+                Some(2) => end = Some((number, "`M2`")),
+                Some(30) => end = Some((number, "`M30`")),
+                _ => {}
             }
             if kind != LineKind::Empty {
                 let chars = line.wire_text(numbered).len();
@@ -390,6 +382,20 @@ impl Program {
             lines,
             fingerprint,
         })
+    }
+
+    /// The same program modelled from a known start: the work position before its first line (as a
+    /// controller reported it), so that the axes a program has not yet set by an absolute move — a first
+    /// move along Z only, incremental moves — are known too.
+    #[must_use]
+    pub fn anchored(&self, start_mm: [f64; 3]) -> Program {
+        let mut p = self.clone();
+        let mut interp = Interpreter::unknown_frame(Dialect::Grbl, start_mm.map(Some));
+        for line in &mut p.lines {
+            // the words were read once already, so they read again
+            let _ = annotate(&mut interp, line);
+        }
+        p
     }
 
     /// Lines that will be sent (non-empty).
@@ -427,6 +433,23 @@ fn strip_n(cleaned: &str, ws: &[Word]) -> String {
         }
     }
     out
+}
+
+/// Note on `line` the modal state and work position before it, and what it does: a G-code block through the
+/// interpreter ([`model`]), homing and jogs as leaving the position unknown.
+fn annotate(interp: &mut Interpreter, line: &mut Line) -> Result<(), WordError> {
+    let pos = interp.work_position();
+    (line.before, line.after, line.start_mm, line.end_mm) = (interp.modal, interp.modal, pos, pos);
+    (line.moves, line.motion, line.breaks_position, line.refusal) = (false, None, false, None);
+    if line.kind != LineKind::Empty && !line.block.starts_with('$') {
+        let ws = words(&line.block)?;
+        model(interp, &ws, line);
+    } else if line.kind == LineKind::System && (line.block == "$H" || line.block.starts_with("$J")) {
+        line.breaks_position = true;
+        interp.known = [false; 3];
+        line.end_mm = interp.work_position();
+    }
+    Ok(())
 }
 
 /// Run a block through the interpreter as GRBL 1.1h reads it, and note on `line` what it does: the modal

@@ -46,6 +46,11 @@ pub enum Record {
         /// before the first line of a fresh run, which the program model cannot know.
         #[serde(default, skip_serializing_if = "Option::is_none")]
         position_mm: Option<[f64; 3]>,
+        /// The controller's work offset `WCO` (mm) when the run started: a controller that restarted, or
+        /// whose offsets were changed, reports another one, and the program's coordinates no longer mean
+        /// the same place.
+        #[serde(default, skip_serializing_if = "Option::is_none")]
+        wco_mm: Option<[f64; 3]>,
     },
     /// The line may have been sent (written before the bytes go out).
     Sent {
@@ -97,6 +102,13 @@ pub enum Record {
         located: bool,
         /// The machine position is trustworthy (motion had stopped before any reset).
         position_retained: bool,
+    },
+    /// The user resumed past a line GRBL rejected (`--skip-line`): it will never run, on purpose.
+    Skip {
+        /// Program line.
+        line: usize,
+        /// The `error:N` GRBL answered it with.
+        code: u16,
     },
     /// Every line executed.
     Complete,
@@ -159,6 +171,10 @@ pub struct JournalState {
     pub runs: usize,
     /// Work position before the first run's first line (from its start record), if reported.
     pub origin: Option<[f64; 3]>,
+    /// The work offset the controller reported when the job's latest run started, if recorded.
+    pub wco: Option<[f64; 3]>,
+    /// Rejected lines the user chose to skip, with GRBL's code.
+    pub skipped: Vec<(usize, u16)>,
 }
 
 /// An open journal, appending.
@@ -290,6 +306,7 @@ impl Replay {
                 lines,
                 numbered,
                 position_mm,
+                wco_mm,
                 ..
             } => {
                 if *version != VERSION {
@@ -303,6 +320,9 @@ impl Replay {
                 st.numbered = *numbered;
                 if st.runs == 0 {
                     st.origin = *position_mm;
+                }
+                if wco_mm.is_some() {
+                    st.wco = *wco_mm;
                 }
                 st.runs += 1;
                 st.stop = None;
@@ -344,6 +364,14 @@ impl Replay {
             }
             Record::Complete => st.complete = true,
             Record::Ambiguous { .. } => {}
+            Record::Skip { line, code } => {
+                if !st.errors.iter().any(|e| e == &(*line, *code)) {
+                    return Err(format!(
+                        "line {line} skipped, but GRBL never rejected it with error:{code}"
+                    ));
+                }
+                st.skipped.push((*line, *code));
+            }
         }
         Ok(())
     }
@@ -380,6 +408,7 @@ mod tests {
             numbered: true,
             from_line: 1,
             position_mm: None,
+            wco_mm: None,
         }
     }
 

@@ -15,6 +15,10 @@ use crate::apps::stream::protocol::{Realtime, RX_BUFFER_BYTES};
 use crate::gcode::interp::Interpreter;
 use crate::gcode::Dialect;
 
+/// GRBL 1.1h's `report_alarm_message` waits this long after printing a critical alarm (`delay_ms(500)`),
+/// then clears a reset that came meanwhile, s.
+pub const CRITICAL_ALARM_DELAY_S: f64 = 0.5;
+
 /// GRBL's machine state, as far as it is modelled (a feed hold is the separate `hold` flag).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum State {
@@ -33,6 +37,9 @@ pub struct Controller {
     pub(super) state: State,
     /// Waiting for a soft reset after a critical alarm.
     pub(super) critical: bool,
+    /// After a critical alarm, the simulated time at which 1.1h prints `[MSG:Reset to continue]`: until then
+    /// it sits in `report_alarm_message`'s `delay_ms(500)` and a reset that arrives is cleared unheard.
+    pub(super) deaf_until_s: Option<f64>,
     /// A soft limit came during a cycle: the machine is coming to a controlled stop (a feed hold), after
     /// which `ALARM:2` locks the controller (GRBL's `limits_soft_check`).
     pub(super) soft_limit_pending: bool,
@@ -100,6 +107,7 @@ impl Controller {
             settings,
             state: State::Idle,
             critical: false,
+            deaf_until_s: None,
             soft_limit_pending: false,
             hold: false,
             decel_left_s: 0.0,
@@ -261,6 +269,10 @@ impl Controller {
                     self.state = State::Run;
                 }
             }
+            0x18 if self.deaf_until_s.is_some() => self
+                .log
+                .events
+                .push("soft reset ignored: inside 1.1h's half second after a critical alarm".into()),
             0x18 => self.soft_reset(),
             0x90 => self.feed_override = 100,
             0x91 => self.feed_override = (self.feed_override + 10).min(200),
@@ -380,8 +392,18 @@ impl Controller {
         self.state = State::Alarm;
         self.critical = true;
         self.say(&format!("ALARM:{code}"));
-        self.say("[MSG:Reset to continue]");
+        // `[MSG:Reset to continue]` follows after `report_alarm_message`'s `delay_ms(500)`, which also
+        // swallows any reset sent meanwhile ([`Controller::deaf_until_s`])
+        self.deaf_until_s = Some(self.sim_time_s + CRITICAL_ALARM_DELAY_S);
         self.log.events.push(format!("ALARM:{code}"));
+    }
+
+    /// The half second after a critical alarm is over: 1.1h says it now waits for the reset.
+    pub(super) fn end_alarm_delay(&mut self) {
+        if self.deaf_until_s.is_some_and(|t| self.sim_time_s >= t) {
+            self.deaf_until_s = None;
+            self.say("[MSG:Reset to continue]");
+        }
     }
 
     /// An alarm that `$X` or a reset clears and that still answers `?` (a probe failure): `ALARM:code`,

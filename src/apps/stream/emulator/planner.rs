@@ -129,6 +129,7 @@ impl Controller {
     /// finish dwells, run the main loop.
     pub fn advance(&mut self, dt_s: f64) {
         self.sim_time_s += dt_s;
+        self.end_alarm_delay();
         if self.hold && self.decel_left_s > 0.0 {
             // Speed falls linearly to 0 over `decel_total_s`: the path covered in this step is the
             // integral of the speed fraction over it, run as that much time at full speed.

@@ -100,13 +100,24 @@ fn a_feed_hold_decelerates_and_a_completed_hold_resets_without_alarm() {
     assert_eq!(send(&mut c, "G0X1\n"), "ok\r\n", "not locked");
 }
 
+/// GRBL 1.1h after a critical alarm: `ALARM:2`, then half a second in `report_alarm_message`'s
+/// `delay_ms(500)` during which a reset is cleared unheard (seen on the real firmware: a reset 0.2 ms after
+/// the alarm is lost), then `[MSG:Reset to continue]`, then nothing answered until a reset.
 #[test]
 fn a_critical_alarm_answers_nothing_until_reset_then_a_stray_ok() {
     let mut c = ctl();
     send(&mut c, "$22=1\n");
     send(&mut c, "$X\n");
     send(&mut c, "$20=1\n");
-    assert!(send(&mut c, "G0X5\n").starts_with("ALARM:2\r\n[MSG:Reset to continue]"));
+    assert_eq!(send(&mut c, "G0X5\n"), "ALARM:2\r\n");
+    assert_eq!(send(&mut c, "\x18"), "", "a reset inside the half second is lost");
+    c.advance(0.49);
+    assert_eq!(String::from_utf8(c.take_output()).unwrap(), "");
+    c.advance(0.02);
+    assert_eq!(
+        String::from_utf8(c.take_output()).unwrap(),
+        "[MSG:Reset to continue]\r\n"
+    );
     assert_eq!(send(&mut c, "?"), "", "no status report while locked");
     let out = send(&mut c, "\x18");
     assert!(out.starts_with("ok\r\n\r\nGrbl 1.1h"), "{out}");
@@ -191,7 +202,12 @@ fn check_mode_and_soft_limits() {
     assert_eq!(send(&mut c, "G0X-10\n"), "ok\r\n");
     c.advance(10.0);
     let a = send(&mut c, "G0X5\n");
-    assert_eq!(a, "ALARM:2\r\n[MSG:Reset to continue]\r\n", "at rest: at once");
+    assert_eq!(a, "ALARM:2\r\n", "at rest: at once");
+    c.advance(0.5);
+    assert_eq!(
+        String::from_utf8(c.take_output()).unwrap(),
+        "[MSG:Reset to continue]\r\n"
+    );
     assert_eq!(send(&mut c, "G0X-1\n"), "", "locked until reset");
     assert!(send(&mut c, "\x18").contains("'$X' to unlock"));
 }

@@ -21,6 +21,11 @@ pub struct Config {
     pub plunge_feed_mm_min: f64,
     /// Allow `$X` (unlock) on resume even when the journal does not say the position was retained.
     pub unlock: bool,
+    /// On resume: the user re-established the machine's position after the controller restarted (homed, or
+    /// set the work coordinates of where the tool stands), so its report is the truth again.
+    pub position_reestablished: bool,
+    /// On resume: lines GRBL rejected (`error:N`) that the user chose to leave out, on purpose.
+    pub skip_lines: Vec<usize>,
     /// Status poll period (GRBL asks for at most 5 Hz: ≥ 200 ms).
     pub status_interval: Duration,
     /// How long the handshake may take.
@@ -45,6 +50,8 @@ impl Default for Config {
             spindle_dwell_s: 2.0,
             plunge_feed_mm_min: 100.0,
             unlock: false,
+            position_reestablished: false,
+            skip_lines: Vec::new(),
             status_interval: Duration::from_millis(200),
             handshake_timeout: Duration::from_secs(5),
             hold_timeout: Duration::from_secs(30),

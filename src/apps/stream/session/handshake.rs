@@ -19,6 +19,8 @@ pub(super) struct Info {
     pub(super) line_numbers: bool,
     pub(super) status: Option<Status>,
     pub(super) critical: bool,
+    /// A banner came that no reset of the streamer's caused: the controller started as the port opened.
+    pub(super) restarted: bool,
 }
 
 /// Where the `$I` probe stands.
@@ -32,6 +34,8 @@ struct Probe {
     resend_at: Option<Instant>,
     /// When the probe was first sent.
     started: Option<Instant>,
+    /// `[MSG:Reset to continue]` came: the controller is locked in a critical alarm.
+    critical_message: bool,
 }
 
 /// How long a controller may stay silent to `$I` and `?` before it is taken for one locked in a critical
@@ -50,6 +54,7 @@ impl Session<'_> {
             line_numbers: false,
             status: None,
             critical: false,
+            restarted: false,
         };
         self.write(b"\r\n\r\n").map_err(|f| self.link_err("wake-up", f))?;
         let mut probe = Probe::default();
@@ -105,7 +110,10 @@ impl Session<'_> {
             _ => false,
         };
         let silent = self.saw.is_empty() && probe.started.is_some_and(|t| t.elapsed() > SILENT_LOCKED);
-        if alarm_reports || silent {
+        // 1.1h prints it half a second after a critical alarm: a streamer that left the controller in alarm
+        // just before (the user declined the reset) leaves it to be read by the next one
+        let told = probe.critical_message && !probe.got_ver;
+        if alarm_reports || silent || told {
             if silent {
                 self.observer
                     .note("the controller answers nothing, as GRBL 1.1h in a critical alarm: soft reset");
@@ -123,6 +131,7 @@ impl Session<'_> {
     fn probe_answer(&mut self, line: &str, probe: &mut Probe, info: &mut Info) -> Result<bool, StreamError> {
         match parse_response(line) {
             Response::Banner(_) => {
+                info.restarted |= !probe.reset_sent;
                 // A (re)start — or a banner printed before the port was opened. If the probe was lost
                 // in a reset, ask again, but only once it is clear no answer is coming: a second `$I`
                 // whose `ok` arrived during streaming would be taken for a program line's.
@@ -150,8 +159,12 @@ impl Session<'_> {
                 probe.got_opt = true;
             }
             Response::Ok if probe.got_ver && probe.got_opt => return Ok(true),
+            Response::Message(m) if m.starts_with("Reset to continue") => probe.critical_message = true,
             Response::Status(st) => {
                 probe.first_status_at.get_or_insert_with(Instant::now);
+                // GRBL sends `WCO` in the first report after a boot or reset and then only every 10–30
+                // reports: keep it from this one
+                self.on_status(st.clone());
                 info.status = Some(st);
             }
             _ => {}
@@ -333,6 +346,38 @@ impl Session<'_> {
             }
             std::thread::sleep(self.cfg.status_interval.max(Duration::from_millis(200)));
         }
+    }
+
+    /// Make sure the work offset is known before a position is read as work coordinates: a controller that
+    /// reports `MPos` sends `WCO` only every 10–30 reports, so ask (at most 32 reports, 50 ms apart) until one
+    /// carries it. `Err` when none does: no work position can be trusted then.
+    pub(super) fn ensure_wco(&mut self) -> Result<(), StreamError> {
+        let wpos = self.status.as_ref().is_some_and(|s| s.wpos.is_some());
+        for _ in 0..32 {
+            if self.wco_seen || wpos {
+                return Ok(());
+            }
+            let seq = self.status_seq;
+            self.write(b"?").map_err(|f| self.link_err("status", f))?;
+            let asked = Instant::now();
+            while self.status_seq == seq && asked.elapsed() < Duration::from_secs(1) {
+                if let Some(l) = self
+                    .read_line(Duration::from_millis(50))
+                    .map_err(|f| self.link_err("status", f))?
+                {
+                    if let Response::Status(st) = parse_response(&l) {
+                        self.on_status(st);
+                    }
+                }
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        Err(StreamError::Timeout {
+            port: self.port(),
+            what: "the controller reported no work offset (WCO) in 32 status reports, so its machine position \
+                   cannot be read as work coordinates"
+                .into(),
+        })
     }
 
     /// Wait for the banner that follows a reset.

@@ -17,6 +17,7 @@
 //! - `tracking`: which lines executed, from status reports and answers, the journal and progress;
 //! - `stop`: the safe stop after a fault;
 //! - `locate`: which lines ran, from the position where motion stopped ([`locate`]);
+//! - `restart`: whether the controller restarted since the job's last run (then a resume stops);
 //! - `resume`: checking a journal for resume, and building what a resume sends.
 
 mod check;
@@ -25,6 +26,7 @@ mod error;
 mod handshake;
 mod locate;
 mod outcome;
+mod restart;
 mod resume;
 mod send;
 mod stop;
@@ -201,13 +203,29 @@ pub fn run_with(
             None
         }
     };
+    // The program modelled from where the tool was before its first line, once that is known (the
+    // handshake's report on a fresh run, the journal's start record on a resume): a first move along Z
+    // alone, or incremental moves, then have known ends, so a stop on them can be located.
+    let anchored: Program;
     let mut s = Session::new(link, program, cfg, observer, controls);
     let info = s.handshake()?;
     s.counter = Counter::new(info.rx_bytes);
     s.line_numbers = info.line_numbers && cfg.number_lines;
     match resume_state {
-        None => s.run_fresh(&info, journal_path),
-        Some(st) => s.run_resume(&info, journal_path, st),
+        None => {
+            if let Some(origin) = s.prepare_fresh(&info)? {
+                anchored = program.anchored(origin);
+                s.program = &anchored;
+            }
+            s.start_fresh(journal_path)
+        }
+        Some(st) => {
+            if let Some(origin) = st.origin {
+                anchored = program.anchored(origin);
+                s.program = &anchored;
+            }
+            s.run_resume(&info, journal_path, st)
+        }
     }
 }
 
@@ -264,16 +282,48 @@ impl<'a> Session<'a> {
 }
 
 impl Session<'_> {
-    /// A new job: the controller must be idle; check mode first if asked; then the whole program.
-    fn run_fresh(&mut self, info: &Info, journal_path: &Path) -> Result<Outcome, StreamError> {
+    /// Before a new job: the controller must be idle; its settings read; check mode first if asked; the
+    /// work position before the first line (returned, when the controller reports one).
+    fn prepare_fresh(&mut self, info: &Info) -> Result<Option<[f64; 3]>, StreamError> {
         self.require_idle(info, false)?;
         self.read_settings(info);
         if self.cfg.check_first {
             self.check_run()?;
         }
+        self.ensure_wco()?;
         self.origin = self.status.as_ref().and_then(|st| self.work_position(st));
+        Ok(self.origin)
+    }
+
+    /// A new job: the journal, then the whole program. Lines GRBL 1.1h will refuse, as the one interpreter
+    /// reads them, are named first: the job will stop there with `error:N`.
+    fn start_fresh(&mut self, journal_path: &Path) -> Result<Outcome, StreamError> {
+        let refused: Vec<String> = self
+            .program
+            .lines
+            .iter()
+            .filter_map(|l| {
+                l.refusal
+                    .as_ref()
+                    .map(|r| format!("line {} `{}`: error:{} ({r})", l.number, l.source.trim(), r.code))
+            })
+            .collect();
+        if let Some(first) = refused.first() {
+            let more = match refused.len() {
+                1 => String::new(),
+                n => format!(" and {} more", n - 1),
+            };
+            self.observer
+                .note(&format!("GRBL 1.1h will refuse {first}{more}: the job will stop there"));
+        }
         let mut j = Journal::create(journal_path)?;
-        j.record_synced(&start_record(self.program, self.cfg, 1, self.origin))?;
+        j.record_synced(&start_record(
+            self.program,
+            self.cfg,
+            1,
+            self.origin,
+            self.wco_seen.then_some(self.wco),
+        ))?;
         self.journal = Some(j);
         let queue = self
             .program
@@ -284,9 +334,16 @@ impl Session<'_> {
     }
 }
 
-fn start_record(program: &Program, cfg: &Config, from_line: usize, position_mm: Option<[f64; 3]>) -> Record {
+fn start_record(
+    program: &Program,
+    cfg: &Config,
+    from_line: usize,
+    position_mm: Option<[f64; 3]>,
+    wco_mm: Option<[f64; 3]>,
+) -> Record {
     Record::Start {
         position_mm,
+        wco_mm,
         version: VERSION,
         program: program.path.display().to_string(),
         fingerprint: program.fingerprint,

@@ -41,8 +41,9 @@ pub(super) fn load_state(program: &Program, cfg: &Config, journal_path: &Path) -
 }
 
 impl Session<'_> {
-    /// Continue the job in the journal: unlock only if the position was retained (or `--unlock`), find
-    /// what ran if the last run could not tell, then stream the resume plan.
+    /// Continue the job in the journal: find what ran if the last run could not tell, plan the resume, and
+    /// only then — when nothing refused — unlock (only if the position was retained, or `--unlock`) and
+    /// stream the plan.
     pub(super) fn run_resume(
         &mut self,
         info: &Info,
@@ -56,7 +57,13 @@ impl Session<'_> {
                 ..
             })
         );
-        self.require_idle(info, retained || self.cfg.unlock)?;
+        self.ensure_wco()?;
+        self.refuse_if_restarted(info, &st, journal_path)?;
+        let skips = rejected_to_skip(&st, &self.cfg.skip_lines).map_err(|what| StreamError::Resume {
+            journal: journal_path.to_path_buf(),
+            what,
+        })?;
+        st.skipped.extend(&skips);
         self.read_settings(info);
         let mut j = Journal::append(journal_path)?;
         let located = matches!(st.stop, Some(Record::Stop { located: true, .. }));
@@ -64,7 +71,10 @@ impl Session<'_> {
             self.locate_after_disconnect(journal_path, &mut j, &mut st)?;
         }
         let program = self.program;
-        if program.sendable().all(|l| st.executed.contains(&l.number)) {
+        if program
+            .sendable()
+            .all(|l| st.executed.contains(&l.number) || st.skipped.iter().any(|s| s.0 == l.number))
+        {
             // The controller finished everything before the fault was noticed.
             j.record_synced(&Record::Complete)?;
             return Ok(Outcome::Completed(Stats::default()));
@@ -78,9 +88,19 @@ impl Session<'_> {
                 journal: journal_path.to_path_buf(),
                 what,
             })?;
+        self.require_idle(info, retained || self.cfg.unlock)?;
+        for &(line, code) in &skips {
+            j.record(&Record::Skip { line, code })?;
+        }
         self.executed = st.executed.clone();
         let here = self.status.as_ref().and_then(|s| self.work_position(s));
-        j.record_synced(&start_record(program, self.cfg, first, here))?;
+        j.record_synced(&start_record(
+            program,
+            self.cfg,
+            first,
+            here,
+            self.wco_seen.then_some(self.wco),
+        ))?;
         self.journal = Some(j);
         self.observer.note(&format!(
             "resuming at line {first} ({} lines already executed)",
@@ -143,6 +163,23 @@ impl Session<'_> {
         st.partial = loc.partial;
         Ok(())
     }
+}
+
+/// The lines `--skip-line` names, each with the code GRBL rejected it with; refuses a line GRBL did not
+/// reject (only a rejected line may be left out: any other would leave the program's path).
+fn rejected_to_skip(st: &JournalState, lines: &[usize]) -> Result<Vec<(usize, u16)>, String> {
+    lines
+        .iter()
+        .map(|&n| {
+            st.errors
+                .iter()
+                .find(|(l, _)| *l == n && !st.ok.contains(&n))
+                .copied()
+                .ok_or_else(|| {
+                    format!("--skip-line {n}: GRBL did not reject line {n}; only a line it answered with error:N may be left out")
+                })
+        })
+        .collect()
 }
 
 /// Where the machine may go, when its coordinates mean something: with homing enabled (`$22=1`) GRBL's
@@ -213,12 +250,14 @@ fn plan_resume(
     cfg: &Config,
     travel: Option<&Travel>,
 ) -> Result<(usize, Vec<Outgoing>), String> {
+    let skipped = |n: &usize| st.skipped.iter().any(|s| s.0 == *n);
     let first = program
         .sendable()
         .map(|l| l.number)
-        .find(|n| !st.executed.contains(n))
+        .find(|n| !st.executed.contains(n) && !skipped(n))
         .ok_or_else(|| "every line has already executed".to_string())?;
     check_in_order(program, st, first)?;
+    refuse_rejected(program, st, first)?;
     let line = program.line(first).expect("first is a program line");
     let moved = st.executed.iter().any(|&n| program.line(n).is_some_and(|l| l.moves)) || st.partial.is_some();
     let partial = st.partial.filter(|(n, _)| *n == first);
@@ -234,7 +273,10 @@ fn plan_resume(
     }
     // the approach ended in G1: the first line that moves in the arc mode it inherits needs the mode written
     let mut inherits_arc = partial.is_none();
-    for l in program.sendable().filter(|l| l.number >= rest_from) {
+    for l in program
+        .sendable()
+        .filter(|l| l.number >= rest_from && !skipped(&l.number))
+    {
         let mut out = Outgoing::program_line(l, cfg.number_lines);
         if inherits_arc {
             let (text, settled) = with_modal_arc(l, &out.text)?;
@@ -281,6 +323,31 @@ fn with_modal_arc(l: &Line, text: &str) -> Result<(String, bool), String> {
         ));
     }
     Ok((out, true))
+}
+
+/// Refuse a resume that would send again a line GRBL rejected and will reject again — the one interpreter,
+/// reading the line as 1.1h does, refuses it too (a line rejected for another reason, a byte corrupted on
+/// the wire, is sent again): it would stop there again, every time, each try repeating the approach. Say
+/// which line, why GRBL refused it, and how to go on.
+fn refuse_rejected(program: &Program, st: &JournalState, first: usize) -> Result<(), String> {
+    let pending = st.errors.iter().find(|(n, _)| {
+        *n >= first
+            && !st.ok.contains(n)
+            && !st.executed.contains(n)
+            && !st.skipped.iter().any(|s| s.0 == *n)
+            && program.line(*n).is_some_and(|l| l.refusal.is_some())
+    });
+    let Some(&(n, code)) = pending else {
+        return Ok(());
+    };
+    let line = program.line(n).expect("a line of the program");
+    let why = line.refusal.as_ref().map_or(String::new(), |r| format!(": {r}"));
+    Err(format!(
+        "GRBL rejected line {n} (`{}`) with error:{code} ({}){why}; a resume would send it again and stop there \
+         again. Fix the program and start the job over, or leave the line out on purpose: --resume --skip-line {n}",
+        line.source.trim(),
+        crate::apps::stream::protocol::error_text(code)
+    ))
 }
 
 /// Refuse when a moving line after `first` ran, or was cut, although `first` did not: GRBL had already

@@ -182,7 +182,8 @@ impl Session<'_> {
             }
         }
         self.reset_sent = true;
-        if let Err(e) = self.reset_flushing(alarm) {
+        let critical = matches!(fault, Fault::Alarm(1 | 2));
+        if let Err(e) = self.reset_flushing(alarm, critical) {
             notes.push(e);
             return (stopped, None, Some(notes.join("; ")));
         }
@@ -242,14 +243,29 @@ impl Session<'_> {
     }
 
     /// Flush GRBL's receive buffer and planner with a soft reset — nothing more may run — and wait for
-    /// the banner. Answers that arrive meanwhile are credited to the lines in flight, except after a
-    /// critical alarm: the locked controller parsed nothing, and the one `ok` 1.1h sends on its reset
-    /// answers no line.
-    fn reset_flushing(&mut self, after_alarm: bool) -> Result<(), String> {
+    /// the banner. Answers that arrive meanwhile are credited to the lines in flight, except after an alarm:
+    /// the locked controller parsed nothing, and the one `ok` 1.1h sends on its reset answers no line.
+    ///
+    /// After a critical alarm (`ALARM:1`, `ALARM:2`) GRBL 1.1h is deaf to a reset for half a second: it
+    /// reports the alarm, waits in `delay_ms(500)`, prints `[MSG:Reset to continue]`, clears any reset that
+    /// came meanwhile and only then waits for one. So the reset goes out once that message is seen (or after
+    /// [`CRITICAL_MESSAGE_WAIT`]), and is sent again every [`RESET_RESEND`] until the banner comes.
+    fn reset_flushing(&mut self, after_alarm: bool, critical: bool) -> Result<(), String> {
+        if critical {
+            self.await_reset_to_continue()?;
+        }
         self.write(&[Realtime::SoftReset.byte()])
             .map_err(|e| format!("{e:?}"))?;
         let deadline = Instant::now() + self.cfg.handshake_timeout;
+        let mut resend = Instant::now() + RESET_RESEND;
+        let mut resets = 1;
         while Instant::now() < deadline {
+            if Instant::now() >= resend {
+                self.write(&[Realtime::SoftReset.byte()])
+                    .map_err(|e| format!("{e:?}"))?;
+                resend = Instant::now() + RESET_RESEND;
+                resets += 1;
+            }
             if let Some(l) = self
                 .read_line(Duration::from_millis(50))
                 .map_err(|e| format!("{e:?}"))?
@@ -258,13 +274,41 @@ impl Session<'_> {
                     Response::Ok if after_alarm => self.observer.note("controller: `ok` on the reset (ignored)"),
                     Response::Ok => self.late_answer(None),
                     Response::Error(code) if !after_alarm => self.late_answer(Some(code)),
-                    Response::Banner(_) => return Ok(()),
+                    Response::Banner(_) => {
+                        if resets > 1 {
+                            self.observer
+                                .note(&format!("the controller took the soft reset after {resets} tries"));
+                        }
+                        return Ok(());
+                    }
                     Response::Status(st) => self.on_status(st),
                     _ => {}
                 }
             }
         }
-        Err("no banner after the soft reset".into())
+        Err(format!(
+            "no banner after {resets} soft resets in {:?}",
+            self.cfg.handshake_timeout
+        ))
+    }
+
+    /// Wait (at most [`CRITICAL_MESSAGE_WAIT`]) for `[MSG:Reset to continue]`, GRBL's word that it now
+    /// listens for the reset after a critical alarm.
+    fn await_reset_to_continue(&mut self) -> Result<(), String> {
+        let until = Instant::now() + CRITICAL_MESSAGE_WAIT;
+        while Instant::now() < until {
+            if let Some(l) = self
+                .read_line(Duration::from_millis(50))
+                .map_err(|e| format!("{e:?}"))?
+            {
+                if let Response::Message(m) = parse_response(&l) {
+                    if m.starts_with("Reset to continue") {
+                        return Ok(());
+                    }
+                }
+            }
+        }
+        Ok(())
     }
 
     /// One fresh report after the reset: the position where everything stopped.
@@ -302,6 +346,14 @@ impl Session<'_> {
         }
     }
 }
+
+/// How long to wait after a critical alarm for `[MSG:Reset to continue]` before resetting anyway (1.1h prints
+/// it 500 ms after the alarm).
+const CRITICAL_MESSAGE_WAIT: Duration = Duration::from_millis(1500);
+
+/// How often the soft reset is sent again until the banner answers it (longer than 1.1h's deaf half second,
+/// so a second try always lands after it).
+const RESET_RESEND: Duration = Duration::from_millis(700);
 
 /// What to check after an alarm, for the user.
 fn alarm_advice(code: u16) -> &'static str {

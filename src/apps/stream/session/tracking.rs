@@ -20,10 +20,14 @@ impl Session<'_> {
             .unwrap_or(super::locate::DEFAULT_ARC_TOLERANCE_MM)
     }
 
-    /// The work position of a report: `WPos`, or `MPos` less the last `WCO`.
+    /// The work position of a report: `WPos`, or `MPos` less the last `WCO` — `None` until a `WCO` has been
+    /// reported (a machine position is not a work position: [`Session::ensure_wco`] asks for one).
     pub(super) fn work_position(&self, st: &Status) -> Option<[f64; 3]> {
         if let Some(w) = st.wpos {
             return Some(w);
+        }
+        if !self.wco_seen {
+            return None;
         }
         st.mpos
             .map(|m| [m[0] - self.wco[0], m[1] - self.wco[1], m[2] - self.wco[2]])
