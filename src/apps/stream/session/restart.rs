@@ -19,7 +19,7 @@ use std::time::{Duration, Instant};
 use super::handshake::Info;
 use super::{Session, StreamError};
 use crate::apps::stream::journal::{Journal, JournalState, Record};
-use crate::apps::stream::program::Spindle;
+use crate::apps::stream::program::{Modal, Spindle};
 use crate::apps::stream::protocol::{parse_response, Response};
 
 /// Work offsets closer than this (mm) are the same.
@@ -91,29 +91,36 @@ impl Session<'_> {
             Some(Record::Stop { reason, .. }) => reason == "disconnect",
             _ => true,
         };
-        let last = st.sent.iter().next_back().and_then(|&n| self.program.line(n))?;
         if !untouched {
             return None;
         }
-        let expected = last.after;
+        // The controller parsed every line up to the last one it answered, and perhaps some sent after it
+        // (a disconnect loses what was in flight): its modal state is the one after one of those lines. Only a
+        // state that none of them leaves is evidence; before any answer there is none.
+        let last_ok = *st.ok.iter().next_back()?;
+        let candidates: Vec<_> = st.sent.range(last_ok..).filter_map(|&n| self.program.line(n)).collect();
+        let last = *candidates.last()?;
         let (spindle, feed) = self.modal_report()?;
-        let lost_spindle = expected.spindle != Spindle::Off && !spindle;
-        let lost_feed = expected.feed_mm_min.is_some_and(|f| f > 0.0) && feed == 0.0;
-        (lost_spindle || lost_feed).then(|| {
-            format!(
-                "its modal state is the power-up one ({}, F{feed}) where line {} had left {}",
-                if spindle { "spindle on" } else { "M5" },
-                last.number,
-                [
-                    (expected.spindle != Spindle::Off).then(|| format!("the spindle on at S{}", expected.spindle_rpm)),
-                    expected.feed_mm_min.map(|f| format!("F{f}")),
-                ]
-                .into_iter()
-                .flatten()
-                .collect::<Vec<_>>()
-                .join(" and ")
-            )
-        })
+        let contradicts = |after: &Modal| {
+            (after.spindle != Spindle::Off && !spindle) || (after.feed_mm_min.is_some_and(|f| f > 0.0) && feed == 0.0)
+        };
+        if !candidates.iter().all(|l| contradicts(&l.after)) {
+            return None;
+        }
+        let expected = last.after;
+        Some(format!(
+            "its modal state is the power-up one ({}, F{feed}) where line {} had left {}",
+            if spindle { "spindle on" } else { "M5" },
+            last.number,
+            [
+                (expected.spindle != Spindle::Off).then(|| format!("the spindle on at S{}", expected.spindle_rpm)),
+                expected.feed_mm_min.map(|f| format!("F{f}")),
+            ]
+            .into_iter()
+            .flatten()
+            .collect::<Vec<_>>()
+            .join(" and ")
+        ))
     }
 
     /// `$G`: whether the spindle is on (`M3`/`M4`) and the feed (`F`), or `None` when it does not answer.
