@@ -20,6 +20,20 @@ fn measure(events: &[Event], from: usize) -> (usize, f64) {
     let c: Vec<usize> = (0..ev.len())
         .filter(|&k| ev[k].tag == "H>C" && ev[k].data.starts_with(b"$C"))
         .collect();
+    if c.len() < 2 {
+        let tail: Vec<String> = ev
+            .iter()
+            .rev()
+            .take(12)
+            .rev()
+            .map(|e| format!("{} {} {}", e.t, e.tag, e.text()))
+            .collect();
+        panic!(
+            "the wire log holds {} `$C` since event {from}; its end:\n{}",
+            c.len(),
+            tail.join("\n")
+        );
+    }
     let seg = &ev[c[0] + 1..c[1]];
     let sent: usize = seg
         .iter()
@@ -42,8 +56,11 @@ struct Lines {
 }
 
 impl Lines {
+    /// The next line from the controller; ten seconds of silence end the benchmark.
     fn line(&mut self) -> String {
+        let deadline = Instant::now() + Duration::from_secs(10);
         loop {
+            assert!(Instant::now() < deadline, "the controller went silent");
             if let Some(i) = self.buf.iter().position(|&b| b == b'\n') {
                 let l: Vec<u8> = self.buf.drain(..=i).collect();
                 return String::from_utf8_lossy(&l).trim().to_string();
@@ -54,9 +71,18 @@ impl Lines {
         }
     }
 
+    /// Send a command and wait for its `ok`; any other answer ends the benchmark with what came back.
     fn command(&mut self, c: &str) {
         self.link.write_all(format!("{c}\n").as_bytes()).unwrap();
-        while self.line() != "ok" {}
+        loop {
+            match self.line().as_str() {
+                "ok" => return,
+                l if l.starts_with("error") || l.starts_with("ALARM") => {
+                    panic!("the minimal streamer's {c} was answered {l}")
+                }
+                _ => {}
+            }
+        }
     }
 }
 
@@ -66,6 +92,7 @@ fn minimal(port: &std::path::Path, lines: &[String]) {
         link: SerialLink::open(port, DEFAULT_BAUD).unwrap(),
         buf: Vec::new(),
     };
+    io.command("$X");
     io.command("$C");
     let (mut inflight, mut next) = (std::collections::VecDeque::new(), 0);
     while next < lines.len() || !inflight.is_empty() {
@@ -116,11 +143,16 @@ fn main() {
         let _ = child.kill();
         let _ = child.wait();
         std::thread::sleep(Duration::from_millis(500));
-        sim.ctl("inject 18"); // stop what the real run had started
+        // stop what the real run had started after its check: a reset during motion raises ALARM:3, so
+        // unlock before the minimal streamer's turn
+        sim.ctl("inject 18");
+        std::thread::sleep(Duration::from_secs(1));
+        sim.ctl("inject 18");
         std::thread::sleep(Duration::from_secs(1));
         let (b_bytes, b_s) = measure(&sim.wire(), from);
         let from = sim.wire().len();
         minimal(&sim.port, &lines);
+        std::thread::sleep(Duration::from_secs(1)); // the kit's wire log is written a moment after the bytes
         let (m_bytes, m_s) = measure(&sim.wire(), from);
         let (b, m) = (b_bytes as f64 / b_s, m_bytes as f64 / m_s);
         println!(
