@@ -22,17 +22,10 @@ fn main() {
         eprintln!("no grbl-sim kit: nothing measured");
         std::process::exit(1);
     };
-    let kinds = [
-        Kind::Reset,
-        Kind::Alarm,
-        Kind::Disconnect,
-        Kind::DisconnectRestart,
-        Kind::ErrorLine,
-    ];
     let t0 = Instant::now();
     let mut failed = vec![];
     for k in first..first + trials {
-        let (seed, kind) = (5000 + k, kinds[(k % 5) as usize]);
+        let (seed, kind) = (5000 + k, Kind::ALL[(k % 5) as usize]);
         let t = Instant::now();
         let r = std::panic::catch_unwind(|| trial(&kit, &exe, seed, kind));
         let ok = r.is_ok();

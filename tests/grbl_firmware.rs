@@ -140,15 +140,7 @@ fn case2_a_z_only_first_move_resumes_after_a_reset() {
         "{}",
         first.said()
     );
-    let st = brdfmill::apps::stream::journal::Journal::load(&j).unwrap();
-    assert!(
-        matches!(
-            st.stop,
-            Some(brdfmill::apps::stream::journal::Record::Stop { located: true, .. })
-        ),
-        "the stop is located from the start record's position: {:?}",
-        st.stop
-    );
+    assert_stop_located(&j, "case 2: the stop is located from the start record's position");
     assert_journal_truthful(&j, &sim.verdict(&prog, [0.0; 3], None, false), "case 2 stop");
     let from = sim.wire().len();
     let second = stream(&sim, &prog, &j, &["--resume", "--unlock", DWELL[0], DWELL[1]]);
@@ -325,16 +317,9 @@ fn ten_seeded_random_faults() {
     let Some((kit, exe)) = kit_or_skip("random faults") else {
         return;
     };
-    let kinds = [
-        Kind::Reset,
-        Kind::Alarm,
-        Kind::Disconnect,
-        Kind::DisconnectRestart,
-        Kind::ErrorLine,
-    ];
     let mut failed = Vec::new();
     for seed in 0..10u64 {
-        let kind = kinds[(seed % 5) as usize];
+        let kind = Kind::ALL[(seed % 5) as usize];
         let r = std::panic::catch_unwind(|| trial(&kit, &exe, 1000 + seed, kind));
         if let Err(e) = r {
             let msg = e

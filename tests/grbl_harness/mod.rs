@@ -525,6 +525,19 @@ pub fn event(r: &serde_json::Value) -> &str {
     r["event"].as_str().unwrap_or("")
 }
 
+/// The journal's last stop was located: the streamer found where motion stopped.
+pub fn assert_stop_located(journal: &Path, what: &str) {
+    let st = brdfmill::apps::stream::journal::Journal::load(journal).expect("journal loads");
+    assert!(
+        matches!(
+            st.stop,
+            Some(brdfmill::apps::stream::journal::Record::Stop { located: true, .. })
+        ),
+        "{what}: stop not located: {:?}",
+        st.stop
+    );
+}
+
 /// The journal's claims at its last stop are the trace's truth: every line it calls executed ran
 /// completely, and — when the stop was located — every line the trace shows moving is executed or the one
 /// it calls cut.
@@ -621,6 +634,17 @@ pub enum Kind {
     ErrorLine,
 }
 
+impl Kind {
+    /// Every kind, in the order trials cycle through them.
+    pub const ALL: [Kind; 5] = [
+        Kind::Reset,
+        Kind::Alarm,
+        Kind::Disconnect,
+        Kind::DisconnectRestart,
+        Kind::ErrorLine,
+    ];
+}
+
 /// A small deterministic generator (SplitMix64).
 pub struct Rng(pub u64);
 impl Rng {
@@ -702,15 +726,7 @@ fn attempt(kit: &Path, exe: &Path, seed: u64, kind: Kind) -> bool {
             !first.said().contains("no banner"),
             "{ctx}: the reset was lost: {first:?}"
         );
-        let st = brdfmill::apps::stream::journal::Journal::load(&j).unwrap();
-        assert!(
-            matches!(
-                st.stop,
-                Some(brdfmill::apps::stream::journal::Record::Stop { located: true, .. })
-            ),
-            "{ctx}: stop not located: {:?}",
-            st.stop
-        );
+        assert_stop_located(&j, &ctx);
         assert_journal_truthful(&j, &sim.verdict(&prog, [0.0; 3], None, false), &ctx);
     }
     let mut extra: Vec<String> = Vec::new();

@@ -185,6 +185,21 @@ pub struct Journal {
     last_sync: Instant,
 }
 
+impl JournalState {
+    /// Whether the user chose to leave line `n` out (`--skip-line`, a `skip` record).
+    pub fn is_skipped(&self, n: usize) -> bool {
+        self.skipped.iter().any(|s| s.0 == n)
+    }
+
+    /// The code GRBL rejected line `n` with, if it did and never accepted it later.
+    pub fn rejection(&self, n: usize) -> Option<u16> {
+        if self.ok.contains(&n) {
+            return None;
+        }
+        self.errors.iter().find(|(l, _)| *l == n).map(|e| e.1)
+    }
+}
+
 impl Journal {
     /// Create a new journal; refuses to replace an existing one.
     pub fn create(path: &Path) -> Result<Journal, JournalError> {

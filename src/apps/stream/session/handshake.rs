@@ -311,30 +311,37 @@ impl Session<'_> {
         })
     }
 
+    /// Ask for one status report (`?`) and read until it arrives (taken in by `on_status`) or `wait` has
+    /// passed; whether it arrived.
+    fn request_status(&mut self, wait: Duration) -> Result<bool, StreamError> {
+        let seq = self.status_seq;
+        self.write(b"?").map_err(|f| self.link_err("status", f))?;
+        let asked = Instant::now();
+        while self.status_seq == seq && asked.elapsed() < wait {
+            if let Some(l) = self
+                .read_line(Duration::from_millis(50))
+                .map_err(|f| self.link_err("status", f))?
+            {
+                if let Response::Status(st) = parse_response(&l) {
+                    self.on_status(st);
+                }
+            }
+        }
+        Ok(self.status_seq != seq)
+    }
+
     /// Poll until the controller is neither running nor holding (bounded by `settle_timeout`).
     pub(super) fn settled_status(&mut self) -> Result<Status, StreamError> {
         let deadline = Instant::now() + self.cfg.settle_timeout;
         loop {
-            let seq = self.status_seq;
-            self.write(b"?").map_err(|f| self.link_err("status", f))?;
-            let asked = Instant::now();
-            while self.status_seq == seq && asked.elapsed() < Duration::from_secs(2) {
-                if let Some(l) = self
-                    .read_line(Duration::from_millis(50))
-                    .map_err(|f| self.link_err("status", f))?
-                {
-                    if let Response::Status(st) = parse_response(&l) {
-                        self.on_status(st);
-                    }
-                }
-            }
+            let fresh = self.request_status(Duration::from_secs(2))?;
             if let Some(st) = self.status.clone() {
                 let busy = matches!(
                     st.state,
                     Some(MachineState::Run | MachineState::Jog | MachineState::Home)
                 ) || matches!(st.state, Some(MachineState::Hold { sub: 1 }))
                     || (st.state == Some(MachineState::Idle) && st.line.is_some());
-                if !busy && self.status_seq != seq {
+                if !busy && fresh {
                     return Ok(st);
                 }
             }
@@ -357,19 +364,7 @@ impl Session<'_> {
             if self.wco_seen || wpos {
                 return Ok(());
             }
-            let seq = self.status_seq;
-            self.write(b"?").map_err(|f| self.link_err("status", f))?;
-            let asked = Instant::now();
-            while self.status_seq == seq && asked.elapsed() < Duration::from_secs(1) {
-                if let Some(l) = self
-                    .read_line(Duration::from_millis(50))
-                    .map_err(|f| self.link_err("status", f))?
-                {
-                    if let Response::Status(st) = parse_response(&l) {
-                        self.on_status(st);
-                    }
-                }
-            }
+            self.request_status(Duration::from_secs(1))?;
             std::thread::sleep(Duration::from_millis(50));
         }
         Err(StreamError::Timeout {

@@ -73,7 +73,7 @@ impl Session<'_> {
         let program = self.program;
         if program
             .sendable()
-            .all(|l| st.executed.contains(&l.number) || st.skipped.iter().any(|s| s.0 == l.number))
+            .all(|l| st.executed.contains(&l.number) || st.is_skipped(l.number))
         {
             // The controller finished everything before the fault was noticed.
             j.record_synced(&Record::Complete)?;
@@ -171,11 +171,7 @@ fn rejected_to_skip(st: &JournalState, lines: &[usize]) -> Result<Vec<(usize, u1
     lines
         .iter()
         .map(|&n| {
-            st.errors
-                .iter()
-                .find(|(l, _)| *l == n && !st.ok.contains(&n))
-                .copied()
-                .ok_or_else(|| {
+            st.rejection(n).map(|code| (n, code)).ok_or_else(|| {
                     format!("--skip-line {n}: GRBL did not reject line {n}; only a line it answered with error:N may be left out")
                 })
         })
@@ -250,11 +246,10 @@ fn plan_resume(
     cfg: &Config,
     travel: Option<&Travel>,
 ) -> Result<(usize, Vec<Outgoing>), String> {
-    let skipped = |n: &usize| st.skipped.iter().any(|s| s.0 == *n);
     let first = program
         .sendable()
         .map(|l| l.number)
-        .find(|n| !st.executed.contains(n) && !skipped(n))
+        .find(|&n| !st.executed.contains(&n) && !st.is_skipped(n))
         .ok_or_else(|| "every line has already executed".to_string())?;
     check_in_order(program, st, first)?;
     refuse_rejected(program, st, first)?;
@@ -275,7 +270,7 @@ fn plan_resume(
     let mut inherits_arc = partial.is_none();
     for l in program
         .sendable()
-        .filter(|l| l.number >= rest_from && !skipped(&l.number))
+        .filter(|l| l.number >= rest_from && !st.is_skipped(l.number))
     {
         let mut out = Outgoing::program_line(l, cfg.number_lines);
         if inherits_arc {
@@ -334,7 +329,7 @@ fn refuse_rejected(program: &Program, st: &JournalState, first: usize) -> Result
         *n >= first
             && !st.ok.contains(n)
             && !st.executed.contains(n)
-            && !st.skipped.iter().any(|s| s.0 == *n)
+            && !st.is_skipped(*n)
             && program.line(*n).is_some_and(|l| l.refusal.is_some())
     });
     let Some(&(n, code)) = pending else {
