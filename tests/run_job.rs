@@ -322,6 +322,34 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
             .any(|l| l.starts_with("report") && l.trim_end().ends_with(&p("report.html").display().to_string())),
         "closing summary names the report"
     );
+    // The cut is the declared machine's (examples/default.toml names the 3018, whose [accuracy] has
+    // backlash): the program finishes one-way, metrics.json carries the machine's errors, the perfect-machine
+    // figures beside the verdict's, and a row per error.
+    let profile = brdfmill::cut::machine::Machine::load(&root().join("machines/grbl-3018.toml")).unwrap();
+    let acc = profile.accuracy.expect("the shipped 3018 declares its accuracy");
+    assert_eq!(
+        m["accuracy"],
+        serde_json::to_value(acc).unwrap(),
+        "metrics.json accuracy"
+    );
+    assert!(
+        nc.lines()
+            .take(30)
+            .any(|l| l.starts_with("(finish:") && l.contains("Oneway")),
+        "a machine with backlash finishes one-way"
+    );
+    assert!(m["milled_ideal"]["cov_ratio"].is_array(), "milled_ideal");
+    let effects: Vec<&str> = m["machine_effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|e| e["error"].as_str().unwrap())
+        .collect();
+    assert_eq!(effects, ["backlash", "steps", "runout"]);
+    assert!(
+        html.contains("What the machine does to the cut"),
+        "the report's machine section"
+    );
     // The design tile against its target: only the facet discretisation separates them.
     let d = &m["design"];
     assert!(f(&d["ndf_corr"]) >= 0.99 && f(&d["ndf_l1"]) <= 0.1, "{d}");
@@ -330,6 +358,46 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
     // One page, offline: images embedded, nothing fetched.
     assert!(html.matches("src=\"data:image/png;base64,").count() >= 7);
     assert!(!html.contains("http://") && !html.contains("https://") && !html.contains("<script"));
+}
+
+/// The default job forced to finish zigzag on the 3018 (25 µm of backlash on X and Y): the run warns, the
+/// report says why, and the backlash alone raises the milled y slope variance measurably (by more than
+/// 0.02 of the target's) above the perfect machine's: a zigzag raster shifts every other pass by the
+/// backlash, a step of slope × backlash between neighbouring passes (closed form: tests/machine_accuracy.rs).
+#[test]
+fn zigzag_on_a_machine_with_backlash_is_warned_of_and_its_cost_measured() {
+    let out = tempfile::tempdir().unwrap();
+    let job = root().join("examples/default.toml");
+    let o = brdfmill(&[
+        "run",
+        job.to_str().unwrap(),
+        "--set",
+        "toolpath.strategy=zigzag",
+        "--out",
+        out.path().to_str().unwrap(),
+    ]);
+    assert!(matches!(o.status.code(), Some(0 | 3)), "{o:?}");
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        stdout
+            .lines()
+            .any(|l| l.starts_with("warning") && l.contains("Finishing zigzag")),
+        "{stdout}"
+    );
+    let m = json(&out.path().join("metrics.json"));
+    let ideal_y = f(&m["milled_ideal"]["cov_ratio"][1]);
+    let backlash = m["machine_effects"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|e| e["error"] == "backlash")
+        .expect("a backlash row");
+    assert_eq!(backlash["alone"], true);
+    let y = f(&backlash["cov_ratio"][1]);
+    println!("milled y: perfect machine {ideal_y:.3}, backlash alone {y:.3}");
+    assert!(y > ideal_y + 0.02, "backlash alone y {y}, perfect machine {ideal_y}");
+    let html = std::fs::read_to_string(out.path().join("report.html")).unwrap();
+    assert!(html.contains("Finishing zigzag on"), "the report says why");
 }
 
 /// Chromium's headless run on the report with `mode` (`--screenshot=PATH` or `--dump-dom`).

@@ -283,6 +283,9 @@ fn simulate(gcode: &str, m: &Machine) -> brdfmill::stages::simulate::Simulation 
         pitch_um: 20.0,
         bounds_mm: Some([-2.0, -2.0, 8.0, 8.0]),
         machine: Some(m.clone()),
+        // what the program commands: a perfect machine (the profile's backlash and runout cut below any
+        // program, and are the machine's, not the toolpath's; tests/machine_accuracy.rs checks those)
+        ideal: true,
         ..Default::default()
     };
     simulate::run(gcode, &cfg).unwrap()

@@ -33,9 +33,14 @@ pub struct Args {
     /// Largest stock grid, cells (8 bytes each; at most 1e9)
     #[arg(long, default_value_t = 250_000_000)]
     pub max_cells: usize,
-    /// Machine profile (a path or a shipped name such as grbl-3018) whose limits the time estimate uses; default: machines/linuxcnc-mill.toml's
+    /// Machine profile (a path or a shipped name such as grbl-3018): the cut follows its `[accuracy]`
+    /// (backlash, runout, step grid) and the time estimate its limits; default: a perfect machine with
+    /// machines/linuxcnc-mill.toml's limits
     #[arg(long)]
     pub machine: Option<PathBuf>,
+    /// Cut as a perfect machine would, ignoring the profile's `[accuracy]`
+    #[arg(long)]
+    pub ideal: bool,
     /// The design (tile.json from `brdfmill facets`, tile.npy beside it), repeated from the work origin:
     /// writes deviation.png and the over-/under-cut figures
     #[arg(long)]
@@ -81,6 +86,7 @@ pub fn config(a: &Args) -> Result<SimulateConfig> {
         // each tool number of the program swept with the profile's shape for it (`--tool` for the rest)
         tools: machine.as_ref().map(simulate::tool_table).unwrap_or_default(),
         machine,
+        ideal: a.ideal,
         ..Default::default()
     })
 }

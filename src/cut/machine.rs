@@ -6,6 +6,7 @@
 //! aluminium and for wax/plastics. Unknown keys are refused (with the line), so a typo never silently falls
 //! back to a default.
 
+pub use crate::cut::accuracy::Accuracy;
 use crate::cut::tool::Shape;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -279,6 +280,10 @@ pub struct Machine {
     pub spindle: Spindle,
     /// Program conventions.
     pub program: ProgramDefaults,
+    /// What the machine does to a program: backlash, runout, the step grid (`[accuracy]`; absent: a perfect
+    /// machine is assumed, and the report says so).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accuracy: Option<Accuracy>,
     /// Tools.
     pub tools: Vec<Tool>,
 }
@@ -462,6 +467,9 @@ impl Machine {
         if l.resolution_mm > 0.01 {
             return Err(field("limits.resolution_mm", "at most 0.01 mm", l.resolution_mm));
         }
+        if let Some(a) = &self.accuracy {
+            a.check().map_err(|(k, e, v)| field(k, &e, v))?;
+        }
         if let Some(r) = l.max_blocks_s {
             pos("limits.max_blocks_s", r)?;
         }
@@ -529,6 +537,22 @@ impl Machine {
             }
         }
         Ok(())
+    }
+
+    /// The machine's errors (perfect when the profile declares none).
+    pub fn accuracy(&self) -> Accuracy {
+        self.accuracy.unwrap_or_default()
+    }
+
+    /// X or Y has backlash: `[accuracy] backlash_um` above 0, or the older `limits.backlash = true`.
+    pub fn has_backlash(&self) -> bool {
+        self.limits.backlash || self.accuracy().has_backlash_xy()
+    }
+
+    /// The grid coordinates are written on, mm: one motor step when all three axes have the same
+    /// `accuracy.steps_per_mm` (so GRBL's rounding to steps moves nothing), else `limits.resolution_mm`.
+    pub fn write_resolution_mm(&self) -> f64 {
+        self.accuracy().common_step_mm().unwrap_or(self.limits.resolution_mm)
     }
 
     /// The block-rate limit of this machine, blocks/s (None: unlimited).

@@ -4,6 +4,7 @@
 //! lowers, and the run-time planner. `toolpath`, `design`, `simulate` and `verify` share it, so no stage
 //! reaches into a later one for these.
 
+pub mod accuracy;
 pub mod dropcutter;
 pub(crate) mod estimate;
 pub mod machine;

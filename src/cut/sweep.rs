@@ -276,8 +276,10 @@ impl Sweep {
                         continue;
                     }
                     hits += 1;
-                    if az + lo * dz >= *cell {
-                        continue; // no point of the sweep over this cell is lower than its lowest tip
+                    // `ρ(t) ≥ h` and `prof` is non-decreasing, so `f ≥ z(lo) + prof(h)`: a cell that bound
+                    // cannot lower is left without solving (most of a dense raster's neighbouring passes)
+                    if az + lo * dz + self.bit.profile(h2.sqrt()) >= *cell {
+                        continue;
                     }
                     let z = self.bull_min(h2, tp, lo, hi);
                     lowered |= z < *cell - LOWERED_MM;

@@ -150,7 +150,7 @@ pub fn emit(setup: &Setup, moves: &[Move]) -> String {
     }
     let q = setup.resolution_mm;
     let mut m = Modal {
-        decimals: (-q.log10() - 1e-9).ceil().clamp(0.0, 6.0) as usize,
+        decimals: decimals_for(q),
         resolution_mm: q,
         ..Default::default()
     };
@@ -238,6 +238,17 @@ fn tool_change(out: &mut String, m: &mut Modal, dialect: Dialect, number: u32, d
     m.xyz = Default::default();
     m.motion = None;
     m.feed = None;
+}
+
+/// The fewest decimals (at most 6) that write every multiple of the resolution `q` exactly: 3 for 0.001 mm,
+/// 5 for one step of 800 steps/mm (0.00125 mm), 6 when none does (a grid of 1/3 µm is then written to 1 nm).
+pub fn decimals_for(q: f64) -> usize {
+    (0..=6)
+        .find(|&d| {
+            let v = q * 10f64.powi(d as i32);
+            (v - v.round()).abs() < 1e-6 * v.max(1.0)
+        })
+        .unwrap_or(6)
 }
 
 /// A coordinate on the machine's resolution `q`: X/Y to the nearest step, Z up to the next (never below).
@@ -374,6 +385,27 @@ mod tests {
             path_tolerance_mm: 0.001,
             resolution_mm: 1e-4,
         }
+    }
+
+    #[test]
+    fn decimals_write_every_step_of_the_grid_exactly() {
+        for (q, d) in [
+            (0.001, 3),
+            (1e-4, 4),
+            (1.0 / 800.0, 5),
+            (1.0 / 400.0, 4),
+            (1.0 / 2000.0, 4),
+            (1.0, 0),
+        ] {
+            assert_eq!(decimals_for(q), d, "{q}");
+            // k steps written and read back are k steps
+            for k in [1_i64, 7, 123, 9_999] {
+                let x: f64 = num(k as f64 * q, d).parse().unwrap();
+                assert_eq!((x / q).round() as i64, k);
+                assert!((x - k as f64 * q).abs() < 1e-12);
+            }
+        }
+        assert_eq!(decimals_for(1.0 / 3000.0), 6);
     }
 
     #[test]

@@ -112,6 +112,7 @@ pub(super) fn empty_outcome(ready: &Ready) -> Outcome {
         rounds: (vec![], 0),
         arrangements: vec![],
         slope_cap: (ready.job.facets.max_slope_deg, ready.slope_cap_from.clone()),
-        warnings: vec![],
+        // what the plan raised or warns of on this machine (a tolerance below its step, zigzag with backlash)
+        warnings: ready.toolpath.notes.clone(),
     }
 }

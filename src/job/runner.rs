@@ -83,10 +83,10 @@ fn ndf_all(
     o: &mut Out,
     outcome: &mut Outcome,
 ) -> Result<Vec<NdfStage>, JobError> {
-    let (r, stepover) = (ready.toolpath.tool.radius_mm(), ready.toolpath.stepover_mm);
+    let (tool, stepover) = (ready.toolpath.cutting_shape(), ready.toolpath.stepover_mm);
     let mut nds = vec![];
     for t in targets {
-        let nd = ndf_stage(ready, &t.target, &t.suffix(), r, stepover, o)?;
+        let nd = ndf_stage(ready, &t.target, &t.suffix(), &tool, stepover, o)?;
         let warnings = crate::stages::ndf::grid_warning(&nd.ndf).map(|w| match t.name.as_str() {
             "" => w,
             name => format!("region `{name}`: {w}"),
@@ -127,8 +127,8 @@ fn design_all(
     progress: &mut dyn FnMut(Progress),
 ) -> Result<Designed, JobError> {
     let plan = &ready.toolpath;
-    let (r, stepover) = (plan.tool.radius_mm(), plan.stepover_mm);
-    let scallop = scallop_lobe(ready, &nds[0], r, stepover)?;
+    let (tool, stepover) = (plan.cutting_shape(), plan.stepover_mm);
+    let scallop = scallop_lobe(ready, &nds[0], &tool, stepover)?;
     let mut designed = Designed {
         scallop,
         tiles: vec![],
@@ -139,7 +139,7 @@ fn design_all(
         if !t.name.is_empty() {
             progress(Progress::Region(&t.name));
         }
-        let d = design_stage(ready, nd, &t.target, &designed.scallop, &plan.tool, stepover, progress)?;
+        let d = design_stage(ready, nd, &t.target, &designed.scallop, stepover, progress)?;
         let (rounds, chosen, arrangements) = (d.rounds.clone(), d.chosen, d.arrangements.clone());
         let (tile, mut fig) = facets_stage(&nd.ndf, d.tile, &t.suffix(), o)?;
         if t.name.is_empty() {
@@ -210,31 +210,32 @@ fn verify_single(
     let Cut {
         program,
         sim,
+        sim_ideal,
         dev,
         figures: sim_figures,
     } = cut;
     let tile = &designed.tiles[0];
-    let v = verify::run(
-        &job.verify,
-        &VerifyInput {
-            target: &target.target,
-            ndf: &nd.ndf,
-            ndf_config: &job.ndf,
-            base: nd.kernel.as_ref(),
-            polish: nd.polish.as_ref(),
-            base_is_scallop: job.target.base == "scallop",
-            tile,
-            sim: &sim,
-            deviation: &dev,
-            tool_radius_mm: ready.toolpath.tool.radius_mm(),
-            stepover_mm: ready.toolpath.stepover_mm,
-            raster_angle_deg: job.toolpath.angle_deg,
-            cone_deg: job.facets.max_slope_deg,
-            rounds: &outcome.rounds.0,
-            arrangements: &outcome.arrangements,
-        },
-    )
-    .map_err(stage_err("verify"))?;
+    let input = VerifyInput {
+        target: &target.target,
+        ndf: &nd.ndf,
+        ndf_config: &job.ndf,
+        base: nd.kernel.as_ref(),
+        polish: nd.polish.as_ref(),
+        base_is_scallop: job.target.base == "scallop",
+        tile,
+        sim: &sim,
+        ideal: sim_ideal.as_ref().map(|s| (s, ready.toolpath.tool.shape)),
+        deviation: &dev,
+        tool: ready.toolpath.cutting_shape(),
+        stepover_mm: ready.toolpath.stepover_mm,
+        raster_angle_deg: job.toolpath.angle_deg,
+        cone_deg: job.facets.max_slope_deg,
+        rounds: &outcome.rounds.0,
+        arrangements: &outcome.arrangements,
+    };
+    let mut v = verify::run(&job.verify, &input).map_err(stage_err("verify"))?;
+    v.metrics.machine_effects = machine_effects(ready, &program.gcode, &input, &v.design)?;
+    v.metrics.notes.extend(ready.toolpath.notes.iter().cloned());
     o.write("wave.png", &v.wave_png.to_png())?;
     let metrics_json = serde_json::to_string_pretty(&v.metrics).map_err(stage_err("verify"))?;
     o.write("metrics.json", metrics_json.as_bytes())?;
@@ -255,6 +256,53 @@ fn verify_single(
     Ok(())
 }
 
+/// Each of the machine's declared errors alone (when it declares more than one): the program cut with only
+/// that error and measured as the verdict measures the milled surface, so the report can say which error
+/// moved what.
+fn machine_effects(
+    ready: &Ready,
+    gcode: &str,
+    input: &VerifyInput,
+    design: &crate::base::slope::SlopeGrid,
+) -> Result<Vec<verify::MachineEffect>, JobError> {
+    let each = ready.toolpath.machine.accuracy().each();
+    if each.len() < 2 {
+        return Ok(vec![]);
+    }
+    let base = ready.job.simulate.config(&ready.toolpath);
+    let mut out = vec![];
+    for (name, acc, alone) in each {
+        let mut machine = ready.toolpath.machine.clone();
+        machine.accuracy = Some(acc);
+        let cfg = crate::stages::simulate::SimulateConfig {
+            machine: Some(machine),
+            ..base.clone()
+        };
+        let sim = crate::stages::simulate::run(gcode, &cfg).map_err(stage_err("simulate"))?;
+        // measured with this cut's own scallop lobe (the runout's flat only when the runout is in the cut)
+        let cut = VerifyInput {
+            sim: &sim,
+            tool: acc.envelope(ready.toolpath.tool.shape),
+            base_is_scallop: false,
+            ..*input
+        };
+        let m = verify::measure_cut(&ready.job.verify, &cut, design).map_err(stage_err("verify"))?;
+        out.push(verify::MachineEffect {
+            error: name.into(),
+            what: if alone {
+                acc.describe()
+            } else {
+                format!("{} µm TIR", ready.toolpath.machine.accuracy().runout_um)
+            },
+            alone,
+            cov_ratio: m.cov_ratio,
+            ndf_l1: m.ndf_l1,
+            ndf_corr: m.ndf_corr,
+        });
+    }
+    Ok(out)
+}
+
 /// What the regions' verification reads besides the cut.
 struct RegionsRun<'a> {
     targets: &'a [RegionTarget],
@@ -272,9 +320,11 @@ fn verify_regions(
     outcome: &mut Outcome,
 ) -> Result<(), JobError> {
     let job = &ready.job;
+    // the regions are judged on the declared machine's cut; their perfect-machine figures are not measured
     let Cut {
         program,
         sim,
+        sim_ideal: _,
         dev,
         figures: sim_figures,
     } = cut;
@@ -289,7 +339,7 @@ fn verify_regions(
             "the regions' part was not composed".into(),
         )));
     };
-    let (r, stepover) = (ready.toolpath.tool.radius_mm(), ready.toolpath.stepover_mm);
+    let (r, stepover) = (ready.toolpath.cutting_shape().radius_mm(), ready.toolpath.stepover_mm);
     // the moving light's lobe: the polish's roughness (a GGX or anisotropic polish by its mean α)
     let polish_alpha = match run.nds[0].polish.as_ref().map(|b| &b.model) {
         Some(crate::stages::brdf::Model::Microfacet(m)) => (m.alpha_x * m.alpha_y).sqrt(),

@@ -35,7 +35,6 @@ pub(super) fn design_stage(
     nd: &NdfStage,
     target: &Brdf,
     scallop: &Kernel,
-    tool: &crate::cut::machine::Tool,
     stepover: f64,
     progress: &mut dyn FnMut(Progress),
 ) -> Result<crate::stages::design::Design, JobError> {
@@ -48,9 +47,7 @@ pub(super) fn design_stage(
             ndf: &nd.ndf,
             base: nd.kernel.as_ref(),
             scallop,
-            tool: Shape::Ball {
-                diameter_mm: tool.diameter_mm(),
-            },
+            tool: ready.toolpath.cutting_shape(),
             stepover_mm: stepover,
             raster_angle_deg: job.toolpath.angle_deg,
             cov_band: tol.cov_ratio,
@@ -70,7 +67,10 @@ pub(super) fn design_stage(
 /// The program and its simulated cut.
 pub(super) struct Cut {
     pub(super) program: toolpath::Toolpath,
+    /// The cut on the declared machine (its backlash, runout and step grid).
     pub(super) sim: Simulation,
+    /// The same program on a perfect machine; `None` when the profile declares no error.
+    pub(super) sim_ideal: Option<Simulation>,
     pub(super) dev: Deviation,
     pub(super) figures: [report::Figure; 2],
 }
@@ -94,10 +94,18 @@ pub(super) fn program_and_cut(
         return Ok(None);
     }
     o.start(progress, Stage::Simulate);
-    let shape = Shape::Ball {
-        diameter_mm: ready.toolpath.tool.diameter_mm(),
-    };
+    let shape = ready.toolpath.cutting_shape();
     let (sim, dev, figures) = simulate_stage(ready, shape, &program.gcode, design, design_file, o)?;
+    let sim_ideal = match sim.stats.accuracy {
+        Some(_) => {
+            let cfg = crate::stages::simulate::SimulateConfig {
+                ideal: true,
+                ..ready.job.simulate.config(&ready.toolpath)
+            };
+            Some(simulate::run(&program.gcode, &cfg).map_err(stage_err("simulate"))?)
+        }
+        None => None,
+    };
     o.done(progress, Stage::Simulate)?;
     if until == Stage::Simulate {
         return Ok(None);
@@ -105,6 +113,7 @@ pub(super) fn program_and_cut(
     Ok(Some(Cut {
         program,
         sim,
+        sim_ideal,
         dev,
         figures,
     }))
@@ -125,7 +134,7 @@ pub(super) fn ndf_stage(
     ready: &Ready,
     target: &Brdf,
     suffix: &str,
-    r: f64,
+    tool: &Shape,
     stepover: f64,
     o: &mut Out,
 ) -> Result<NdfStage, JobError> {
@@ -138,8 +147,15 @@ pub(super) fn ndf_stage(
     let kernel = match job.target.base.as_str() {
         "none" => None,
         "scallop" => Some(
-            Kernel::scallop(&domain, r, stepover, job.toolpath.angle_deg, polish.as_ref(), &job.ndf)
-                .map_err(stage_err("ndf"))?,
+            Kernel::scallop(
+                &domain,
+                tool,
+                stepover,
+                job.toolpath.angle_deg,
+                polish.as_ref(),
+                &job.ndf,
+            )
+            .map_err(stage_err("ndf"))?,
         ),
         spec => {
             let b = Brdf::parse(&resolve_spec(spec, &ready.dir)).map_err(stage_err("ndf"))?;
@@ -154,13 +170,13 @@ pub(super) fn ndf_stage(
 
 /// The finishing raster's scallop lobe with the material's polish: the base lobe when that is the scallop
 /// lobe, otherwise made here (the as-milled model and the milled measurement use it either way).
-pub(super) fn scallop_lobe(ready: &Ready, nd: &NdfStage, r: f64, stepover: f64) -> Result<Kernel, JobError> {
+pub(super) fn scallop_lobe(ready: &Ready, nd: &NdfStage, tool: &Shape, stepover: f64) -> Result<Kernel, JobError> {
     let job = &ready.job;
     match &nd.kernel {
         Some(k) if job.target.base == "scallop" => Ok(k.clone()),
         _ => Kernel::scallop(
             &job.ndf.domain(),
-            r,
+            tool,
             stepover,
             job.toolpath.angle_deg,
             nd.polish.as_ref(),

@@ -92,11 +92,17 @@ impl Kernel {
         })
     }
 
-    /// The scallop lobe of a ball of radius `r_mm` at stepover `s_mm`, passes at `angle_deg` from x,
-    /// optionally convolved with the half-angle distribution of `polish`.
+    /// The scallop lobe of `tool` at stepover `s_mm`, passes at `angle_deg` from x, optionally convolved with
+    /// the half-angle distribution of `polish`.
+    ///
+    /// Across the passes the surface is a row of the tool's cross-sections `s_mm` apart: for a ball of radius
+    /// `r` a circular arc of half-width `s/2`, whose slopes `t = v / sqrt(r² − v²)` are uniform in `v`,
+    /// so their density is `(r / s) / (1 + t²)^{3/2}` on `|t| ≤ t_max`. A bull-nose (a ball with runout is
+    /// one: [`crate::cut::accuracy`]) has a flat of width `w` at its bottom: a fraction `min(w/s, 1)` of the
+    /// surface is level, and the arcs of its corner radius cover the remaining `s − w`.
     pub fn scallop(
         domain: &SlopeDomain,
-        r_mm: f64,
+        tool: &crate::cut::tool::Shape,
         s_mm: f64,
         angle_deg: f64,
         polish: Option<&Brdf>,
@@ -105,17 +111,24 @@ impl Kernel {
         let kd = kernel_domain(domain);
         let (sin, cos) = angle_deg.to_radians().sin_cos();
         let n = (-sin, cos); // across the passes
-        let h = s_mm / 2.0;
+        let r_mm = tool.corner_radius_mm();
+        let flat_mm = (tool.diameter_mm() - 2.0 * r_mm).clamp(0.0, s_mm);
+        let h = (s_mm - flat_mm) / 2.0;
         let t_max = h / (r_mm * r_mm - h * h).max(1e-300).sqrt();
-        // the line, as weighted points
-        let samples = 4001;
-        let pts: Vec<(f64, f64, f64)> = (0..samples)
+        // the line, as weighted points (each arc sample's weight is its share of the stepover)
+        let samples = if h > 0.0 && r_mm > 0.0 { 4001 } else { 0 };
+        // an arc sample of slope t covers dx = r dt / (1 + t²)^{3/2} of the stepover: its share is dx / s
+        let dt = if samples > 0 { 2.0 * t_max / samples as f64 } else { 0.0 };
+        let mut pts: Vec<(f64, f64, f64)> = (0..samples)
             .map(|k| {
                 let t = -t_max + 2.0 * t_max * (k as f64 + 0.5) / samples as f64;
-                let w = r_mm / (s_mm * (1.0 + t * t).powf(1.5));
+                let w = r_mm * dt / (s_mm * (1.0 + t * t).powf(1.5));
                 (t * n.0, t * n.1, w)
             })
             .collect();
+        if flat_mm > 0.0 {
+            pts.push((0.0, 0.0, flat_mm / s_mm));
+        }
         // bilinear splat of the line onto the grid, then (optionally) the polish lobe by FFT convolution
         let mut g = SlopeGrid::from_fn(kd, |_, _| 0.0);
         for (p, q, w) in &pts {
@@ -125,9 +138,13 @@ impl Kernel {
             g = Self::from_brdf(b, domain, cfg)?.convolve(&g);
         }
         let label = match polish {
-            None => format!("scallop(r={r_mm} mm, stepover={s_mm:.5} mm, angle={angle_deg}°)"),
+            None => format!(
+                "scallop({}, stepover={s_mm:.5} mm, angle={angle_deg}°)",
+                scallop_tool(tool)
+            ),
             Some(b) => format!(
-                "scallop(r={r_mm} mm, stepover={s_mm:.5} mm, angle={angle_deg}°) * {}",
+                "scallop({}, stepover={s_mm:.5} mm, angle={angle_deg}°) * {}",
+                scallop_tool(tool),
                 b.spec
             ),
         };
@@ -165,8 +182,53 @@ impl Kernel {
     }
 }
 
+/// How a scallop lobe's label names its tool: the arcs' radius, and the flat when there is one.
+fn scallop_tool(tool: &crate::cut::tool::Shape) -> String {
+    let r = tool.corner_radius_mm();
+    let flat = tool.diameter_mm() - 2.0 * r;
+    if flat > 0.0 {
+        format!("r={r} mm, flat={flat:.4} mm")
+    } else {
+        format!("r={r} mm")
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    use crate::cut::tool::Shape;
+
+    fn ball(r_mm: f64) -> Shape {
+        Shape::Ball {
+            diameter_mm: 2.0 * r_mm,
+        }
+    }
+
+    #[test]
+    fn a_flat_bottom_levels_its_share_of_the_stepover() {
+        // a bull-nose of corner radius r and flat w at stepover s: the arcs cover s − w with the slopes of
+        // a ball at stepover s − w, so the variance is that ball's times (s − w)/s
+        let (r, s, w) = (0.25, 0.06, 0.015);
+        let domain = SlopeDomain::square(512, 0.5);
+        let cfg = NdfConfig::default();
+        let bull = Shape::Bull {
+            diameter_mm: 2.0 * r + w,
+            corner_radius_mm: r,
+        };
+        let (_, vq) = Kernel::scallop(&domain, &bull, s, 0.0, None, &cfg).unwrap().variance();
+        let (_, vball) = Kernel::scallop(&domain, &ball(r), s - w, 0.0, None, &cfg)
+            .unwrap()
+            .variance();
+        let want = vball * (s - w) / s;
+        assert!((vq - want).abs() < domain.dq().powi(2) / 4.0 + 1e-7, "{vq} vs {want}");
+        // wider than the stepover: level
+        let wide = Shape::Bull {
+            diameter_mm: 2.0 * r + 2.0 * s,
+            corner_radius_mm: r,
+        };
+        let (_, v) = Kernel::scallop(&domain, &wide, s, 0.0, None, &cfg).unwrap().variance();
+        assert!(v < 1e-9, "{v}");
+    }
+
     use super::*;
 
     #[test]
@@ -182,12 +244,12 @@ mod tests {
             .sum::<f64>()
             / n as f64;
         let domain = SlopeDomain::square(512, 1.0);
-        let k = Kernel::scallop(&domain, r, s, 0.0, None, &NdfConfig::default()).unwrap();
+        let k = Kernel::scallop(&domain, &ball(r), s, 0.0, None, &NdfConfig::default()).unwrap();
         let (vp, vq) = k.variance();
         assert!(vp < 1e-6, "no slope along the passes: {vp}");
         // bilinear splatting adds at most dq²/6
         assert!((vq - var).abs() < domain.dq().powi(2) / 4.0 + 1e-6, "{vq} vs {var}");
-        let k90 = Kernel::scallop(&domain, r, s, 90.0, None, &NdfConfig::default()).unwrap();
+        let k90 = Kernel::scallop(&domain, &ball(r), s, 90.0, None, &NdfConfig::default()).unwrap();
         let (vp90, vq90) = k90.variance();
         assert!((vp90 - vq).abs() < 1e-6 && vq90 < 1e-6);
     }
@@ -197,9 +259,9 @@ mod tests {
         let domain = SlopeDomain::square(256, 1.5);
         let cfg = NdfConfig::default();
         let polish = Brdf::parse("beckmann:alpha=0.1").unwrap();
-        let k = Kernel::scallop(&domain, 0.5, 0.2, 30.0, Some(&polish), &cfg).unwrap();
+        let k = Kernel::scallop(&domain, &ball(0.5), 0.2, 30.0, Some(&polish), &cfg).unwrap();
         let (vp, vq) = k.variance();
-        let ks = Kernel::scallop(&domain, 0.5, 0.2, 30.0, None, &cfg).unwrap();
+        let ks = Kernel::scallop(&domain, &ball(0.5), 0.2, 30.0, None, &cfg).unwrap();
         let (sp, sq) = ks.variance();
         assert!(
             ((vp + vq) - (sp + sq + 0.01)).abs() < 2e-4,

@@ -31,7 +31,7 @@ pub mod gcode;
 pub use deviation::{deviation, Deviation};
 
 use crate::base::heightfield::Heightfield;
-use crate::cut::machine::Machine;
+use crate::cut::machine::{Accuracy, Machine};
 pub use crate::cut::tool::Shape;
 use crate::cut::{stock, sweep};
 use crate::gcode::moves::P3;
@@ -45,9 +45,18 @@ pub fn tool_table(machine: &Machine) -> BTreeMap<u32, Shape> {
 }
 
 impl SimulateConfig {
-    /// The bit of tool `number`.
+    /// The bit of tool `number` as the machine cuts with it (its runout envelope).
     pub fn shape_of(&self, number: u32) -> Shape {
-        self.tools.get(&number).copied().unwrap_or(self.tool)
+        self.accuracy()
+            .envelope(self.tools.get(&number).copied().unwrap_or(self.tool))
+    }
+
+    /// The errors the cut follows: the machine's `[accuracy]`, or none when `ideal` or without a machine.
+    pub fn accuracy(&self) -> Accuracy {
+        match &self.machine {
+            Some(m) if !self.ideal => m.accuracy(),
+            _ => Accuracy::PERFECT,
+        }
     }
 }
 
@@ -99,8 +108,12 @@ pub struct SimulateConfig {
     /// Flute length, mm: a move whose tip goes deeper than this below the stock top is refused (the shank
     /// would rub). 0: not checked.
     pub flute_length_mm: f64,
-    /// Machine limits for the time estimate; None: `machines/linuxcnc-mill.toml`.
+    /// The machine: its limits for the time estimate (None: `machines/linuxcnc-mill.toml`'s) and its
+    /// `[accuracy]`, which the cut follows unless `ideal` (None: a perfect machine).
     pub machine: Option<Machine>,
+    /// Cut as a perfect machine would, whatever `machine` declares (the `milled_ideal` figures).
+    #[serde(default)]
+    pub ideal: bool,
 }
 
 impl Default for SimulateConfig {
@@ -117,6 +130,7 @@ impl Default for SimulateConfig {
             max_segments: ParseOptions::default().max_segments,
             flute_length_mm: 0.0,
             machine: None,
+            ideal: false,
         }
     }
 }
@@ -255,6 +269,9 @@ pub struct SimStats {
     pub rapid_length_mm: f64,
     /// Largest chord sagitta of the arcs' linearisation, µm.
     pub arc_tolerance_um: f64,
+    /// The machine's errors the cut followed (backlash, runout, step grid); absent: a perfect machine.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accuracy: Option<Accuracy>,
 }
 
 /// A simulated cut.
@@ -456,9 +473,21 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
             )));
         }
     }
+    let acc = cfg.accuracy();
+    // the path the machine follows (the commanded one on a perfect machine)
+    let actual;
+    let path = if acc.is_perfect() {
+        prog
+    } else {
+        actual = Motion {
+            segments: acc.actual_path(&prog.segments, cfg.start_mm),
+            ..Motion::default()
+        };
+        &actual
+    };
     let grid = stock_grid(prog, cfg)?;
     let top = cfg.stock_top_mm;
-    let (z, rep, tool_cuts) = sweep_tools(&grid, top, cfg, prog);
+    let (z, rep, tool_cuts) = sweep_tools(&grid, top, cfg, path);
     let area = grid.pitch * grid.pitch;
     let removed: f64 = z.iter().map(|v| (top - v).max(0.0)).sum::<f64>() * area;
     let min_z = z.iter().copied().fold(f64::INFINITY, f64::min);
@@ -500,6 +529,7 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
         feed_length_mm: len.feed_mm,
         rapid_length_mm: len.rapid_mm,
         arc_tolerance_um: cfg.arc_tolerance_um,
+        accuracy: (!acc.is_perfect()).then_some(acc),
     };
     Ok(Simulation {
         heightfield: Heightfield {

@@ -376,7 +376,7 @@ fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, Toolpath
     let tol = cfg.tolerance_um * 1e-3;
     let dc = design.cutter(tool.shape);
     let (vmin, vmax) = design.v_range();
-    let q = machine.limits.resolution_mm;
+    let q = machine.write_resolution_mm();
     let vs = on_resolution(&design, raster::pass_positions(vmin, vmax, stepover), q);
     let mut raw = cl_rows(&design, &dc, &vs);
     raw.par_iter_mut().for_each(|pass| lift_for_rounding(pass, q));
@@ -452,7 +452,7 @@ fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, Toolpath
         dialect: machine.dialect,
         header: &header,
         path_tolerance_mm: machine.limits.path_tolerance_mm,
-        resolution_mm: machine.limits.resolution_mm,
+        resolution_mm: q,
     };
     let gcode = emit::emit(&setup, &moves);
     let summary = Summary {

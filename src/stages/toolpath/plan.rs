@@ -23,6 +23,10 @@ pub const MAX_PASSES: f64 = 200_000.0;
 /// engagement) are fractions of the cutting feed, so a smaller one would be written as `F0`.
 pub const MIN_FEED_MM_MIN: f64 = 1.0;
 
+/// The fewest motor steps a finishing stepover may span: rounded to steps, passes of `n` steps are spaced
+/// within `1/(2n)` of the stepover asked for (12% at 4).
+pub const MIN_STEPOVER_STEPS: f64 = 4.0;
+
 /// The largest collinear-point tolerance, µm (a quarter of a millimetre would flatten the facets).
 pub const MAX_TOLERANCE_UM: f64 = 250.0;
 
@@ -45,6 +49,9 @@ pub struct ToolpathPlan {
     pub strategy: Strategy,
     /// The design grid's pitch the work was bounded for, mm.
     pub pitch_mm: f64,
+    /// What the check changed or warns of, in plain words (a tolerance raised to the machine's step grid,
+    /// zigzag finishing on an axis with backlash).
+    pub notes: Vec<String>,
 }
 
 /// `ToolpathError::Limit` naming the field and the estimate.
@@ -117,12 +124,15 @@ impl ToolpathConfig {
             tool.cutting(self.stock).feed_mm_min
         };
         let strategy = match self.strategy {
-            Strategy::Auto if machine.limits.backlash => Strategy::Oneway,
+            Strategy::Auto if machine.has_backlash() => Strategy::Oneway,
             Strategy::Auto => Strategy::Zigzag,
             s => s,
         };
+        let mut cfg = self.clone();
+        let notes = self.check_resolution(machine, stepover_mm, strategy, &mut cfg)?;
         Ok(ToolpathPlan {
-            cfg: self.clone(),
+            cfg,
+            notes,
             machine: machine.clone(),
             tool: tool.clone(),
             rough: rough.clone(),
@@ -154,6 +164,69 @@ impl ToolpathConfig {
                 self.scallop_um
             ))
         }
+    }
+
+    /// What the machine resolves (`accuracy.steps_per_mm`, else `limits.resolution_mm`): a scallop below half
+    /// a Z step or a stepover of fewer than [`MIN_STEPOVER_STEPS`] steps is refused, naming the key and the
+    /// machine's figure; a simplification tolerance below half a step is raised to it (the writer rounds to
+    /// the grid anyway), said in the notes; zigzag finishing on an axis with backlash is warned of.
+    fn check_resolution(
+        &self,
+        machine: &Machine,
+        stepover_mm: f64,
+        strategy: Strategy,
+        cfg: &mut ToolpathConfig,
+    ) -> Result<Vec<String>, ToolpathError> {
+        let acc = machine.accuracy();
+        let (step, source) = match acc.step_mm() {
+            Some(s) => (s, "accuracy.steps_per_mm"),
+            None => ([machine.limits.resolution_mm; 3], "limits.resolution_mm"),
+        };
+        let um = |mm: f64| format!("{:.4} µm", mm * 1000.0);
+        if self.stepover_mm == 0.0 && self.scallop_um * 1e-3 < step[2] / 2.0 {
+            return Err(ToolpathError::Config(format!(
+                "`scallop_um` = {} µm is below half of the Z step {} of `{}` ({source}): the controller rounds every Z to a step, so the scallops would be rounding, not cut; use at least {}",
+                self.scallop_um,
+                um(step[2]),
+                machine.name,
+                um(step[2] / 2.0)
+            )));
+        }
+        let xy = step[0].max(step[1]);
+        if stepover_mm < MIN_STEPOVER_STEPS * xy {
+            let key = if self.stepover_mm > 0.0 {
+                "stepover_mm"
+            } else {
+                "scallop_um"
+            };
+            return Err(ToolpathError::Config(format!(
+                "`{key}` gives a stepover of {} = {:.1} steps of {} ({source} of `{}`): rounded to steps the passes would be unevenly spaced; a stepover of at least {MIN_STEPOVER_STEPS} steps ({}) is needed",
+                um(stepover_mm),
+                stepover_mm / xy,
+                um(xy),
+                machine.name,
+                um(MIN_STEPOVER_STEPS * xy)
+            )));
+        }
+        let mut notes = vec![];
+        let half = machine.write_resolution_mm() / 2.0;
+        if self.tolerance_um > 0.0 && self.tolerance_um * 1e-3 < half {
+            cfg.tolerance_um = half * 1000.0;
+            notes.push(format!(
+                "`toolpath.tolerance_um` {} µm raised to {}: half the {} grid `{}` writes coordinates on ({source}), finer than any point can be placed",
+                self.tolerance_um,
+                um(half),
+                um(2.0 * half),
+                machine.name
+            ));
+        }
+        if strategy == Strategy::Zigzag && acc.has_backlash_xy() {
+            notes.push(format!(
+                "Finishing zigzag on `{}`, whose axes have {} / {} µm of backlash (accuracy.backlash_um): every other pass is shifted by the backlash along the passes, so a facet of slope p gets steps of p × b between neighbouring passes; `strategy = \"auto\"` finishes one-way. The milled figures below are on this machine, `milled_ideal` on a perfect one.",
+                machine.name, acc.backlash_um[0], acc.backlash_um[1]
+            ));
+        }
+        Ok(notes)
     }
 
     /// The design grid the raster samples (the area's diagonal plus the larger tool's radius on each side),
@@ -194,6 +267,12 @@ impl ToolpathConfig {
 }
 
 impl ToolpathPlan {
+    /// The finishing tool as this machine cuts with it: its runout envelope ([`crate::cut::accuracy`]), the
+    /// shape the design loop, the scallop lobe and the simulation all use.
+    pub fn cutting_shape(&self) -> Shape {
+        self.machine.accuracy().envelope(self.tool.shape)
+    }
+
     /// The tile must be periodic (it repeats over the area) and on the grid the plan was checked for; the
     /// layers of each tool, from the tile's relief and the profile, are bounded ([`rough::MAX_LAYERS`]).
     pub(super) fn check_tile(&self, tile: &Heightfield) -> Result<(), ToolpathError> {

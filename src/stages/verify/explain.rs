@@ -177,7 +177,7 @@ pub fn shortfall(f: &Findings) -> Vec<String> {
     }
     if f.deviation.unreachable_fraction > 0.001 {
         notes.push(format!(
-            "{:.2}% of the surface is unreachable for the {} mm ball (concave corners narrower than the bit); there the milled slopes are the bit's, not the design's.",
+            "{:.2}% of the surface is unreachable for a bit cutting {} mm across (concave corners narrower than the cut, runout included); there the milled slopes are the bit's, not the design's.",
             f.deviation.unreachable_fraction * 100.0,
             2.0 * r
         ));

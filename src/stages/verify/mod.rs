@@ -22,7 +22,7 @@ mod run;
 
 pub use metrics::{SurfaceMetrics, Tolerances};
 pub use regions::{RegionMetrics, RegionsMetrics};
-pub use run::{run, VerifyConfig, VerifyError, VerifyInput, VerifyOutput};
+pub use run::{measure_cut, run, VerifyConfig, VerifyError, VerifyInput, VerifyOutput};
 
 use serde::{Deserialize, Serialize};
 
@@ -35,6 +35,16 @@ pub struct Metrics {
     pub design: SurfaceMetrics,
     /// The simulated milled surface (⊛ polish lobe) against the target.
     pub milled: SurfaceMetrics,
+    /// The same program cut by a perfect machine (the figures before the machine's backlash, runout and step
+    /// grid); equal to `milled` when the profile declares no error. Absent in files written before it.
+    #[serde(default)]
+    pub milled_ideal: Option<SurfaceMetrics>,
+    /// The machine's errors the milled cut followed; absent: a perfect machine.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accuracy: Option<crate::cut::accuracy::Accuracy>,
+    /// What each declared error moves (see [`MachineEffect`]); empty when the machine declares at most one.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub machine_effects: Vec<MachineEffect>,
     /// The milled surface meets every tolerance.
     pub pass: bool,
     /// The tolerances used.
@@ -61,6 +71,30 @@ pub struct Metrics {
     /// With a `highlight` target: the image, its configuration and the correlations.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub highlight: Option<HighlightMetrics>,
+}
+
+/// One machine error and the milled figures of a cut with it alone, or with all but it
+/// (`metrics.json` `machine_effects`).
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct MachineEffect {
+    /// The error: `backlash`, `runout` or `steps`.
+    pub error: String,
+    /// It, in words with its figure.
+    pub what: String,
+    /// True: the cut has this error alone (a perfect machine otherwise); false: the cut has every declared
+    /// error but this one, so its effect is the difference from `milled`.
+    #[serde(default = "yes")]
+    pub alone: bool,
+    /// Slope variance ratios x, y of that cut.
+    pub cov_ratio: [f64; 2],
+    /// NDF relative L1 distance.
+    pub ndf_l1: f64,
+    /// NDF correlation.
+    pub ndf_corr: f64,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// A `highlight` target against what was designed and milled (`metrics.json` `highlight`).

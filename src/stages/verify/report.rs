@@ -78,9 +78,15 @@ fn fmt(v: f64) -> String {
     }
 }
 
-fn metrics_table(design: &SurfaceMetrics, milled: &SurfaceMetrics) -> String {
-    let mut s = String::from("<table class=\"metrics\"><tr><th>metric</th><th>tolerance</th><th>design tile</th><th>milled (simulated)</th></tr>");
-    for (d, m) in design.checks.iter().zip(&milled.checks) {
+fn metrics_table(design: &SurfaceMetrics, milled: &SurfaceMetrics, ideal: Option<&SurfaceMetrics>) -> String {
+    let mut s = String::from(
+        "<table class=\"metrics\"><tr><th>metric</th><th>tolerance</th><th>design tile</th><th>milled (simulated)</th>",
+    );
+    if ideal.is_some() {
+        s.push_str("<th>milled on a perfect machine</th>");
+    }
+    s.push_str("</tr>");
+    for (k, (d, m)) in design.checks.iter().zip(&milled.checks).enumerate() {
         let cell = |c: &super::metrics::Check| {
             format!(
                 "<td class=\"{}\">{} {}</td>",
@@ -90,11 +96,12 @@ fn metrics_table(design: &SurfaceMetrics, milled: &SurfaceMetrics) -> String {
             )
         };
         s.push_str(&format!(
-            "<tr><td>{}</td><td>{}</td>{}{}</tr>",
+            "<tr><td>{}</td><td>{}</td>{}{}{}</tr>",
             esc(&d.name),
             esc(&d.tolerance),
             cell(d),
-            cell(m)
+            cell(m),
+            ideal.and_then(|i| i.checks.get(k)).map(cell).unwrap_or_default()
         ));
     }
     s.push_str("</table>");
@@ -180,7 +187,53 @@ fn single(h: &mut String, m: &Metrics) {
     ));
     notes(h, &m.notes);
     h.push_str(&format!("<h2>Metrics</h2><p>Reference: {}.</p>", esc(&m.reference)));
-    h.push_str(&metrics_table(&m.design, &m.milled));
+    let ideal = m.milled_ideal.as_ref().filter(|_| m.accuracy.is_some());
+    if let Some(a) = &m.accuracy {
+        h.push_str(&format!(
+            "<p>The milled column is the cut on the declared machine ({}); the last column is the same program on a perfect machine.</p>",
+            esc(&a.describe())
+        ));
+    }
+    h.push_str(&metrics_table(&m.design, &m.milled, ideal));
+    machine_effects(h, m);
+}
+
+/// Which machine error moved what: the cut with each error alone.
+fn machine_effects(h: &mut String, m: &Metrics) {
+    let (Some(ideal), false) = (&m.milled_ideal, m.machine_effects.is_empty()) else {
+        return;
+    };
+    h.push_str(
+        "<h2>What the machine does to the cut</h2><p>The program cut on a perfect machine, with one of the machine's errors alone, with all but one, and with all of them, each measured as the milled surface is: an error's effect is its row against the perfect machine's, or the verdict's row against the row without it.</p>\
+         <table class=\"metrics\"><tr><th>cut</th><th>variance ratio x</th><th>variance ratio y</th><th>NDF L1</th><th>NDF correlation</th></tr>",
+    );
+    let row = |h: &mut String, name: &str, c: [f64; 2], l1: f64, corr: f64| {
+        h.push_str(&format!(
+            "<tr><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td></tr>",
+            esc(name),
+            c[0],
+            c[1],
+            l1,
+            corr
+        ));
+    };
+    row(h, "perfect machine", ideal.cov_ratio, ideal.ndf_l1, ideal.ndf_corr);
+    for e in &m.machine_effects {
+        let name = if e.alone {
+            format!("{} only ({})", e.error, e.what)
+        } else {
+            format!("all but {}", e.error)
+        };
+        row(h, &name, e.cov_ratio, e.ndf_l1, e.ndf_corr);
+    }
+    row(
+        h,
+        "all of them (the verdict's)",
+        m.milled.cov_ratio,
+        m.milled.ndf_l1,
+        m.milled.ndf_corr,
+    );
+    h.push_str("</table>");
 }
 
 /// Verdict, reasons and per-region metrics of a spatially varying target.
@@ -229,6 +282,6 @@ fn regions(h: &mut String, m: &super::RegionsMetrics) {
             esc(&r.name),
             esc(&r.target)
         ));
-        h.push_str(&metrics_table(&r.design, &r.milled));
+        h.push_str(&metrics_table(&r.design, &r.milled, None));
     }
 }

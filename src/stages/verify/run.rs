@@ -5,6 +5,7 @@
 //! lobes are applied to what, the metrics and their verdict, the explanations, the optical constants of the
 //! wave check) lives here, so the job runner only sequences stages and writes files.
 
+use super::metrics::SurfaceMetrics;
 use super::milled::{self, Measurement};
 use super::report::Figure;
 use super::{explain, highlight, metrics, render, Metrics, Tolerances};
@@ -124,12 +125,16 @@ pub struct VerifyInput<'a> {
     pub base_is_scallop: bool,
     /// The design tile.
     pub tile: &'a Tile,
-    /// The simulated cut.
+    /// The simulated cut on the declared machine (the verdict's).
     pub sim: &'a Simulation,
+    /// The same program cut by a perfect machine, and its tool without runout (`metrics.json`
+    /// `milled_ideal`, measured with that tool's scallop lobe); None: the machine declares no error, so `sim`
+    /// is that cut.
+    pub ideal: Option<(&'a Simulation, crate::cut::tool::Shape)>,
     /// Its deviation from the design.
     pub deviation: &'a Deviation,
-    /// Finishing tool radius, mm.
-    pub tool_radius_mm: f64,
+    /// The finishing tool as the machine cuts with it (its runout envelope, [`crate::cut::accuracy`]).
+    pub tool: crate::cut::tool::Shape,
     /// Finishing stepover, mm.
     pub stepover_mm: f64,
     /// Angle of the finishing passes from x, degrees.
@@ -173,13 +178,25 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         .target
         .highlight()
         .map(|h| highlight::compare(h, n, &design, &milled, &mut design_m, &mut milled_m, &tol));
+    let milled_ideal = match input.ideal {
+        Some((sim, tool)) => {
+            let ideal = VerifyInput {
+                sim,
+                tool,
+                base_is_scallop: false,
+                ..*input
+            };
+            measure_cut(cfg, &ideal, &design)?
+        }
+        None => milled_m.clone(),
+    };
     let facets = input.tile.config.facets_x * input.tile.config.facets_y;
     let mut notes = explain::shortfall(&explain::Findings {
         milled: &milled_m,
         design: &design_m,
         deviation: input.deviation,
         tolerances: &tol,
-        tool_radius_mm: input.tool_radius_mm,
+        tool_radius_mm: input.tool.radius_mm(),
         stepover_mm: input.stepover_mm,
         outside_grid: outside,
         facets,
@@ -207,6 +224,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
     if let Some(note) = highlight.as_ref().and_then(|h| h.note.clone()) {
         notes.push(note);
     }
+    notes.extend(machine_note(input.sim, &milled_m, &milled_ideal));
     if let Some(w) = crate::stages::ndf::grid_warning(input.ndf) {
         notes.push(format!("{w}."));
     }
@@ -249,6 +267,9 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         pass: milled_m.pass,
         design: design_m,
         milled: milled_m,
+        milled_ideal: Some(milled_ideal),
+        accuracy: input.sim.stats.accuracy,
+        machine_effects: vec![],
         tolerances: tol,
         reference,
         notes,
@@ -283,10 +304,54 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
     })
 }
 
+/// The figures of the cut `input.sim` against the target, as the verdict measures the milled surface (the
+/// highlight's correlation included for a drawn target). `design` is the design tile's NDF, which the
+/// highlight comparison needs beside it.
+pub fn measure_cut(cfg: &VerifyConfig, input: &VerifyInput, design: &SlopeGrid) -> Result<SurfaceMetrics, VerifyError> {
+    let n = input.ndf;
+    let tol = cfg.tolerances;
+    let (milled, _, _) = milled_ndf(cfg, input)?;
+    let cone_tan = input.cone_deg.to_radians().tan();
+    let mut m = metrics::measure(&n.observed, &milled, input.target, &cfg.incident_deg, &tol, cone_tan);
+    if let Some(h) = input.target.highlight() {
+        let mut d = metrics::measure(&n.observed, design, input.target, &cfg.incident_deg, &tol, cone_tan);
+        highlight::compare(h, n, design, &milled, &mut d, &mut m, &tol);
+    }
+    Ok(m)
+}
+
+/// What the machine's errors did to the milled figures (none when it declares none).
+fn machine_note(sim: &Simulation, milled: &SurfaceMetrics, ideal: &SurfaceMetrics) -> Option<String> {
+    let acc = sim.stats.accuracy?;
+    let mut s = format!(
+        "The milled figures are the cut on the declared machine ({}): slope variance ratios x {:.3}, y {:.3}, \
+         NDF L1 {:.3}, correlation {:.3}; a perfect machine would leave x {:.3}, y {:.3}, L1 {:.3}, correlation \
+         {:.3} (`milled_ideal`). The design loop designs for the runout's envelope, so it corrects the runout; \
+         backlash and the step grid it cannot correct (one-way finishing keeps backlash out of the finish).",
+        acc.describe(),
+        milled.cov_ratio[0],
+        milled.cov_ratio[1],
+        milled.ndf_l1,
+        milled.ndf_corr,
+        ideal.cov_ratio[0],
+        ideal.cov_ratio[1],
+        ideal.ndf_l1,
+        ideal.ndf_corr,
+    );
+    match (milled.pass, ideal.pass) {
+        (false, true) => s.push_str(" The machine's errors alone make the difference between pass and fail."),
+        (true, false) => s.push_str(
+            " The cut passes on this machine though not on a perfect one (the loop corrected for its runout).",
+        ),
+        _ => {}
+    }
+    Some(s)
+}
+
 /// The band of the simulated stock left out of the milled NDF, cells: one tool radius grazed, one cut from
 /// one side only, a design sample either side, and the half stepover the slope mean reaches.
 fn milled_margin(input: &VerifyInput) -> usize {
-    let r = input.tool_radius_mm;
+    let r = input.tool.radius_mm();
     let p = input.sim.heightfield.pitch_mm;
     ((2.0 * r + 2.0 * input.tile.heightfield.pitch_mm) / p).ceil() as usize + milled::reach_cells(p, input.stepover_mm)
 }
@@ -316,7 +381,7 @@ fn milled_ndf(cfg: &VerifyConfig, input: &VerifyInput) -> Result<(SlopeGrid, f64
         Some(k) if input.base_is_scallop => k.clone(),
         _ => Kernel::scallop(
             &domain,
-            input.tool_radius_mm,
+            &input.tool,
             input.stepover_mm,
             input.raster_angle_deg,
             input.polish,
