@@ -41,6 +41,10 @@ enum Command {
     /// A measured (X3P) or simulated (.npy) surface → NDF and BRDF, geometric and wave optics, with a report
     /// in DIR.
     Analyze(cli::analyze::Args),
+    /// Machine profile → a calibration coupon (program, reading sheet, dimensions) whose slots measure the
+    /// profile's backlash, runout and steps per mm with calipers. Writes DIR/calibrate.nc, calibrate.md,
+    /// calibrate.json (and tool.tbl for LinuxCNC).
+    Calibrate(cli::calibrate::Args),
 }
 
 fn main() {
@@ -55,6 +59,7 @@ fn main() {
         Command::Stream(a) => ok(cli::stream::run(&a)),
         Command::Emulate(a) => ok(cli::emulate::run(&a)),
         Command::Analyze(a) => ok(cli::analyze::run(&a)),
+        Command::Calibrate(a) => ok(cli::calibrate::run(&a)),
     };
     match result {
         Ok(0) => {}

@@ -2,4 +2,6 @@
 //! and the G-code model) and analysing a measured or simulated surface.
 
 pub mod analyze;
+/// A coupon program and sheet that measure a machine profile's `[accuracy]` (backlash, runout, steps/mm).
+pub mod calibrate;
 pub mod stream;

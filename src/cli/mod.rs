@@ -41,6 +41,7 @@ macro_rules! eprint {
 }
 
 pub mod analyze;
+pub mod calibrate;
 pub mod emulate;
 pub mod facets;
 pub mod ndf;
