@@ -2,6 +2,8 @@
 //! contract, the report rendered by a real browser, and job files refused before any work.
 
 use brdfmill::job::Job;
+mod planner;
+
 use std::path::{Path, PathBuf};
 use std::process::Command;
 
@@ -335,7 +337,7 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
     assert!(
         nc.lines()
             .take(30)
-            .any(|l| l.starts_with("(finish:") && l.contains("Oneway")),
+            .any(|l| l.starts_with("(finish:") && l.contains("one-way")),
         "a machine with backlash finishes one-way"
     );
     assert!(m["milled_ideal"]["cov_ratio"].is_array(), "milled_ideal");
@@ -358,6 +360,52 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
     // One page, offline: images embedded, nothing fetched.
     assert!(html.matches("src=\"data:image/png;base64,").count() >= 7);
     assert!(!html.contains("http://") && !html.contains("https://") && !html.contains("<script"));
+    // Issue 35. The air the simulation found: feeding through air is under 5% of the estimate (the
+    // approaches descend through air at the machine's Z feed to just above the stock as it stands, and
+    // travel between passes at the retract height); the estimate's rapid share is reported beside it.
+    let (air, est, rapid) = (f(&pj["air_feed_s"]), f(&pj["estimated_s"]), f(&pj["rapid_s"]));
+    println!("air feeds {air:.0} s, rapids {rapid:.0} s of {est:.0} s");
+    assert!(air > 0.0 && air < 0.05 * est, "air {air} s of {est} s");
+    assert!(rapid > 0.0 && rapid < est, "rapids {rapid} s of {est} s");
+    assert_eq!(pj["files"][0]["file"], "program.nc", "one tool, one program");
+    // the estimate (unlimited look-ahead) against a planner that looks 15 blocks ahead, as GRBL does, on the
+    // program as written: within 5%
+    let m = brdfmill::cut::machine::Machine::load(&root().join("machines/grbl-3018.toml")).unwrap();
+    let opt = brdfmill::stages::simulate::gcode::ParseOptions {
+        dialect: m.dialect,
+        start_mm: [0.0, 0.0, m.program.clearance_z()],
+        arc_tolerance_mm: 2e-3,
+        ..Default::default()
+    };
+    let motion = brdfmill::stages::simulate::gcode::parse(&nc, &opt).unwrap();
+    let buffered = planner::planner_with_buffer(&motion.moves, opt.start_mm, &m);
+    let ours = f(&pj["estimated_unlimited_s"]);
+    println!("estimate {ours:.0} s, 15-block planner {buffered:.0} s");
+    assert!((buffered - ours).abs() <= 0.05 * ours, "{ours} s against {buffered} s");
+    // The setup sheet comes before the evidence, and its stock holds the cut (area + the ball's 0.25 mm
+    // radius on each side), the pad and the clamps: at least 13.2 + 0.5 + 10 + 2·10 mm across.
+    let sheet = html.find("<h2>To mill this</h2>").expect("the setup sheet");
+    assert!(
+        sheet < html.find("<figure>").unwrap(),
+        "the setup sheet before the first figure"
+    );
+    let stock = html[sheet..]
+        .split("<th>stock</th><td>")
+        .nth(1)
+        .and_then(|t| t.split(" mm").next())
+        .expect("a stock row");
+    let size: Vec<f64> = stock
+        .rsplit("at least ")
+        .next()
+        .unwrap()
+        .split(" × ")
+        .map(|v| v.trim().parse().unwrap())
+        .collect();
+    assert!(
+        size[0] >= 13.2 + 0.5 + 10.0 + 20.0 - 1e-9 && size[1] >= 13.2 + 0.5 + 20.0 - 1e-9,
+        "{stock}"
+    );
+    assert!(html[sheet..].contains("touch-off pad") && html[sheet..].contains("brdfmill stream program.nc"));
 }
 
 /// The default job forced to finish zigzag on the 3018 (25 µm of backlash on X and Y): the run warns, the
@@ -611,4 +659,38 @@ fn a_target_wider_than_the_ndf_grid_is_reported_with_its_escaped_mass() {
             "α {alpha}: ndf.json says {m}, the closed form {exact}"
         );
     }
+}
+
+/// Issue 35: the setup sheet follows the machine's controller. The default job on the LinuxCNC profile:
+/// the sheet says how to check and run the program there (its tool table, `rs274`) and names no GRBL
+/// command; the run writes the tool table beside the program.
+#[test]
+fn a_linuxcnc_jobs_setup_sheet_names_no_grbl_command() {
+    let out = tempfile::tempdir().unwrap();
+    let job = root().join("examples/default.toml");
+    let o = brdfmill(&[
+        "run",
+        job.to_str().unwrap(),
+        "--set",
+        "machine.profile=../machines/linuxcnc-mill.toml",
+        "--set",
+        "toolpath.area_mm=[4.0, 4.0]",
+        "--out",
+        out.path().to_str().unwrap(),
+    ]);
+    assert!(matches!(o.status.code(), Some(0 | 3)), "{o:?}");
+    let html = std::fs::read_to_string(out.path().join("report.html")).unwrap();
+    let start = html.find("<h2>To mill this</h2>").expect("the setup sheet");
+    let sheet = &html[start..start + html[start..].find("</table>").unwrap()];
+    for grbl in ["GRBL", "$C", "brdfmill stream", "G10 L20"] {
+        assert!(!sheet.contains(grbl), "`{grbl}` in a LinuxCNC setup sheet: {sheet}");
+    }
+    assert!(sheet.contains("tool.tbl") && sheet.contains("rs274"), "{sheet}");
+    let table = std::fs::read_to_string(out.path().join("tool.tbl")).unwrap();
+    assert!(table.lines().any(|l| l.starts_with("T9 P9 D0.5 ")), "{table}");
+    let nc = std::fs::read_to_string(out.path().join("program.nc")).unwrap();
+    assert!(
+        nc.contains("G53 G0 Z0\nT9 M6\nG43 H9\n"),
+        "the tool change after a machine retract"
+    );
 }

@@ -97,7 +97,8 @@ fn linuxcnc_language_is_refused_at_its_line_and_column() {
         ),
         ("parameter", "G21 G90\nG0 Z1\nG1 X#1 F100\nM2\n", 3, 5),
         ("assignment", "G21 G90\n#1 = 5\nM2\n", 2, 1),
-        ("machine coordinates", "G21 G90\nG0 Z1\nG53 G0 Z0\nM2\n", 3, 1),
+        // (`G53 G0 Z…` alone is read, as a tool change's retract)
+        ("machine coordinates", "G21 G90\nG0 Z1\nG53 G0 X5 Z0\nM2\n", 3, 1),
         ("plasma", "G21 G90\nM52 P1\nM2\n", 2, 1),
     ];
     for (name, text, line, column) in refused {

@@ -133,14 +133,28 @@ fn summary(a: &Args, t: &brdfmill::stages::toolpath::ToolpathConfig, outcome: &j
         println!("relief    {r:.3} mm (the design, highest to lowest point)");
     }
     if let Some(p) = &outcome.program {
+        let hms = brdfmill::stages::toolpath::hms;
         println!(
-            "program   {} — {} lines, estimated {} of machining, cuts to {:.3} mm; tools: {}",
-            a.out.join("program.nc").display(),
+            "program   {} — {} lines, estimated {} of machining ({} in rapids{}), cuts to {:.3} mm; tools: {}",
+            p.file_names()
+                .iter()
+                .map(|f| a.out.join(f).display().to_string())
+                .collect::<Vec<_>>()
+                .join(", then "),
             p.lines,
-            brdfmill::stages::toolpath::hms(p.estimated_s),
+            hms(p.estimated_s),
+            hms(p.rapid_s),
+            p.air_feed_s
+                .map(|s| format!(", {} feeding through air", hms(s)))
+                .unwrap_or_default(),
             p.depth_mm,
             t.tools_in_order()
         );
+    }
+    for (k, v) in &outcome.setup {
+        if matches!(k.as_str(), "stock" | "work zero" | "check, then run") {
+            println!("{:<9} {v}", k.split(',').next().unwrap_or(k));
+        }
     }
     let code = match (&outcome.metrics, &outcome.regions) {
         (Some(m), _) => verdict(m, a.allow_shortfall),

@@ -10,8 +10,10 @@ use std::path::PathBuf;
 /// Arguments of `brdfmill simulate`.
 #[derive(clap::Args, Debug)]
 pub struct Args {
-    /// The G-code program (any source: the subset of docs/DESIGN.md §5; anything else is refused with line and column)
-    pub program: PathBuf,
+    /// The G-code program (any source: the subset of docs/DESIGN.md §5; anything else is refused with line and
+    /// column); several programs run one after another on the same stock (GRBL's program-1.nc, program-2.nc, …)
+    #[arg(required = true, num_args = 1..)]
+    pub program: Vec<PathBuf>,
     /// The bit: ball:D, flat:D or bull:D:R (diameter and corner radius, mm)
     #[arg(long)]
     pub tool: String,
@@ -95,7 +97,17 @@ pub fn config(a: &Args) -> Result<SimulateConfig> {
 pub fn run(a: &Args) -> Result<()> {
     super::check_out_dir("--out", &a.out)?;
     let cfg = config(a)?;
-    let text = std::fs::read_to_string(&a.program).with_context(|| format!("cannot read {}", a.program.display()))?;
+    let texts = a
+        .program
+        .iter()
+        .map(|p| std::fs::read_to_string(p).with_context(|| format!("cannot read {}", p.display())))
+        .collect::<Result<Vec<String>>>()?;
+    let names = a
+        .program
+        .iter()
+        .map(|p| p.display().to_string())
+        .collect::<Vec<_>>()
+        .join(" + ");
     let design = match &a.design {
         Some(p) => {
             let t = TileFile::read(p)?;
@@ -104,7 +116,8 @@ pub fn run(a: &Args) -> Result<()> {
         None => None,
     };
     let t0 = std::time::Instant::now();
-    let sim = simulate::run(&text, &cfg).map_err(|e| anyhow!("{}: {e}", a.program.display()))?;
+    let refs: Vec<&str> = texts.iter().map(String::as_str).collect();
+    let sim = simulate::run_files(&refs, &cfg).map_err(|e| anyhow!("{names}: {e}"))?;
     let t_sim = t0.elapsed().as_secs_f64();
     let dev = design.as_ref().map(|d| simulate::deviation(&sim, d, &cfg.tool));
     // the gouge check covers each tool: its own cut against the design
@@ -137,7 +150,7 @@ pub fn run(a: &Args) -> Result<()> {
     let json = simulate::SimFile::new(
         &sim,
         &cfg,
-        &a.program.display().to_string(),
+        &names,
         dev.as_ref(),
         a.design.as_ref().map(|p| p.display().to_string()),
     )

@@ -48,6 +48,9 @@ pub struct Args {
     /// Write the finishing passes as straight blocks only (no G2/G3 arcs in the pass plane)
     #[arg(long)]
     pub no_arcs: bool,
+    /// Refuse a program whose estimated run time is longer (hours)
+    #[arg(long, default_value_t = 12.0)]
+    pub max_hours: f64,
     /// Output G-code file
     #[arg(long)]
     pub out: PathBuf,
@@ -80,6 +83,7 @@ pub fn config(a: &Args) -> Result<ToolpathConfig> {
         feed_mm_min: a.feed_mm_min.unwrap_or(0.0),
         job: format!("tile {}", a.tile.display()),
         arcs: !a.no_arcs,
+        max_hours: a.max_hours,
     })
 }
 
@@ -92,7 +96,42 @@ pub fn run(a: &Args) -> Result<()> {
     let hf = tile.load_heightfield(&a.tile)?;
     let t0 = std::time::Instant::now();
     let p = toolpath::run(&cfg, &hf, &machine)?;
-    brdfmill::base::io::write_atomic(&a.out, p.gcode.as_bytes())?;
+    // one file, or GRBL's one per tool beside it: OUT-1.nc, OUT-2.nc, … in the order they run
+    let n = p.files.len();
+    for (k, f) in p.files.iter().enumerate() {
+        let path = if n == 1 {
+            a.out.clone()
+        } else {
+            let stem = a
+                .out
+                .file_stem()
+                .map(|s| s.to_string_lossy().to_string())
+                .unwrap_or_default();
+            let ext = a
+                .out
+                .extension()
+                .map(|s| s.to_string_lossy().to_string())
+                .unwrap_or_else(|| "nc".into());
+            a.out.with_file_name(format!("{stem}-{}.{ext}", k + 1))
+        };
+        brdfmill::base::io::write_atomic(&path, f.gcode.as_bytes())?;
+        if n > 1 {
+            println!(
+                "program   {} — tool {} (program {} of {n}: zero Z on the touch-off pad before it)",
+                path.display(),
+                f.summary.tools.join(", "),
+                k + 1
+            );
+        }
+    }
+    if machine.dialect == brdfmill::gcode::Dialect::Linuxcnc {
+        let table = a.out.with_file_name("tool.tbl");
+        brdfmill::base::io::write_atomic(&table, brdfmill::gcode::tool_table(&machine).as_bytes())?;
+        println!(
+            "tools     {} (LinuxCNC tool table: rs274 -t, or the machine's [EMCIO] TOOL_TABLE)",
+            table.display()
+        );
+    }
     let s = &p.summary;
     println!("machine   {} ({:?}), tool {}", machine.name, machine.dialect, cfg.tool);
     println!(

@@ -237,6 +237,7 @@ mod tests {
             kind: SegmentKind::Feed,
             line: 1,
             tool: 0,
+            feed_mm_min: 100.0,
         }
     }
 

@@ -16,6 +16,7 @@ struct Seg {
     dir: P3,
     v_nom: f64,
     acc: f64,
+    rapid: bool,
 }
 
 /// Run time of a program and its block rate.
@@ -30,6 +31,8 @@ pub struct Estimate {
     pub blocks: usize,
     /// The most motion blocks that fall in any one second of the unlimited run, blocks/s.
     pub peak_blocks_s: f64,
+    /// The part of `s` spent in rapids (`G0`), s.
+    pub rapid_s: f64,
 }
 
 /// Estimated time of a move list in seconds.
@@ -41,10 +44,11 @@ pub fn estimate_s(moves: &[Move], start: P3, machine: &Machine) -> f64 {
 /// rate over a sliding one-second window.
 pub fn estimate(moves: &[Move], start: P3, machine: &Machine, max_blocks_s: Option<f64>) -> Estimate {
     let (dwell, seg_times) = segment_times(moves, start, machine);
+    let rapid_s = seg_times.iter().filter(|s| s.2).map(|s| s.1).sum();
     // per motion block (an arc's chords are one block)
     let mut times: Vec<f64> = vec![];
     let mut last = usize::MAX;
-    for (block, t) in seg_times {
+    for (block, t, _) in seg_times {
         if block == last {
             *times.last_mut().expect("a block was started") += t;
         } else {
@@ -76,13 +80,14 @@ pub fn estimate(moves: &[Move], start: P3, machine: &Machine, max_blocks_s: Opti
         block_limited_s,
         blocks: times.len(),
         peak_blocks_s: peak as f64,
+        rapid_s,
     }
 }
 
-/// The dwell total and the planned time of each motion segment with its block, s; an arc is planned as
+/// The dwell total and the planned time of each motion segment with its block and whether it is a rapid, s; an arc is planned as
 /// chords within [`moves::CHORD_TOL_MM`] (a controller's arc segments are of that order: GRBL's `$12` is
 /// 2 µm), which only changes its junction speeds by the chords' small angles.
-fn segment_times(moves: &[Move], start: P3, machine: &Machine) -> (f64, Vec<(usize, f64)>) {
+fn segment_times(moves: &[Move], start: P3, machine: &Machine) -> (f64, Vec<(usize, f64, bool)>) {
     let l = &machine.limits;
     let mut segs: Vec<Seg> = vec![];
     let mut stops: Vec<usize> = vec![]; // indices of segments that must start from rest
@@ -137,6 +142,7 @@ fn segment_times(moves: &[Move], start: P3, machine: &Machine) -> (f64, Vec<(usi
             dir,
             v_nom: v / 60.0,
             acc,
+            rapid,
         });
         at = p;
     }
@@ -187,7 +193,11 @@ fn segment_times(moves: &[Move], start: P3, machine: &Machine) -> (f64, Vec<(usi
         let d_acc = (vp * vp - v0 * v0) / (2.0 * a);
         let d_dec = (vp * vp - v1 * v1) / (2.0 * a);
         let d_cruise = (s.len - d_acc - d_dec).max(0.0);
-        times.push((s.block, (vp - v0) / a + (vp - v1) / a + d_cruise / vp.max(1e-12)));
+        times.push((
+            s.block,
+            (vp - v0) / a + (vp - v1) / a + d_cruise / vp.max(1e-12),
+            s.rapid,
+        ));
     }
     (dwell, times)
 }

@@ -107,6 +107,11 @@ pub struct ProgramDefaults {
     /// Coolant while cutting: `off` (default), `mist` (`M7`) or `flood` (`M8`).
     #[serde(default = "coolant_off")]
     pub coolant: Coolant,
+    /// LinuxCNC: the machine-coordinate Z every tool change retracts to first (`G53 G0 Z…`), mm; default 0,
+    /// the top of travel on a machine homed there (LinuxCNC homes before it runs a program). GRBL programs
+    /// change no tool (one program per tool).
+    #[serde(default)]
+    pub tool_change_machine_z_mm: f64,
 }
 
 fn coolant_off() -> Coolant {
@@ -240,6 +245,16 @@ pub enum Stock {
     Aluminium,
     /// Machining wax and plastics.
     Wax,
+}
+
+impl Stock {
+    /// The material's name for people: "aluminium", "machining wax".
+    pub fn name(self) -> &'static str {
+        match self {
+            Stock::Aluminium => "aluminium",
+            Stock::Wax => "machining wax",
+        }
+    }
 }
 
 impl Tool {

@@ -5,8 +5,8 @@
 //! then sweeps its own tile's segments over its own cells, so no cell is ever written by two threads and the
 //! result does not depend on the schedule.
 
-use super::sweep::Sweep;
 use super::sweep::{Segment, SegmentKind};
+use super::sweep::{Sweep, CUT_MM, LOWERED_MM};
 use crate::cut::tool::Shape;
 use rayon::prelude::*;
 
@@ -41,6 +41,9 @@ pub struct SweepReport {
     pub cutting_segments: usize,
     /// Indices of rapid (`G0`) segments that removed material, in program order.
     pub rapid_cuts: Vec<usize>,
+    /// Indices of the segments that lowered some cell by more than [`CUT_MM`] when they ran (in program
+    /// order; with [`Order::DeepestFirst`] meaningless, like `rapid_cuts`), ascending.
+    pub cut_segments: Vec<usize>,
 }
 
 /// Sweep `segs` with `bit` over a stock flat at `top`; returns the heights row-major (`nx × ny`) and a report.
@@ -119,13 +122,13 @@ pub fn sweep_into(
             .for_each(|bin| bin.sort_by(|x, y| sweeps[*x as usize].z_min().total_cmp(&sweeps[*y as usize].z_min())));
     }
     let stock: &[f64] = z;
-    let results: Vec<(usize, Vec<f64>, u64, Vec<usize>)> = bins
+    let results: Vec<(usize, TileOutput)> = bins
         .par_iter()
         .enumerate()
         .filter(|(_, bin)| !bin.is_empty())
         .map(|(t, bin)| {
             let (ti, tj) = (t % tx, t / tx);
-            let (cells, swept, rapid) = pulp::Arch::new().dispatch(TileSweep {
+            let out = pulp::Arch::new().dispatch(TileSweep {
                 grid,
                 stock,
                 corner: (ti * TILE, tj * TILE),
@@ -133,14 +136,14 @@ pub fn sweep_into(
                 sweeps: &sweeps,
                 segs,
             });
-            (t, cells, swept, rapid)
+            (t, out)
         })
         .collect();
     let mut report = SweepReport {
         cutting_segments: cutting,
         ..Default::default()
     };
-    for (t, cells, swept, rapid) in results {
+    for (t, (cells, swept, rapid, cuts)) in results {
         let (ti, tj) = (t % tx, t / tx);
         let (ci0, cj0) = (ti * TILE, tj * TILE);
         let w = TILE.min(grid.nx - ci0);
@@ -155,11 +158,17 @@ pub fn sweep_into(
         }
         report.swept_cells += swept;
         report.rapid_cuts.extend(rapid);
+        report.cut_segments.extend(cuts);
     }
     report.rapid_cuts.sort_unstable();
     report.rapid_cuts.dedup();
+    report.cut_segments.sort_unstable();
+    report.cut_segments.dedup();
     report
 }
+
+/// A tile's cells, the cells swept, the rapids that lowered one, and the segments that cut.
+type TileOutput = (Vec<f64>, u64, Vec<usize>, Vec<usize>);
 
 /// One tile's sweep, run by `pulp` with the widest vector instructions this CPU has, so that the
 /// per-cell closed forms of [`Sweep::row`] (inlined here) take four or eight cells at a time.
@@ -176,8 +185,7 @@ struct TileSweep<'a> {
 }
 
 impl pulp::WithSimd for TileSweep<'_> {
-    /// The tile's cells, the cells swept, and the rapids that lowered one.
-    type Output = (Vec<f64>, u64, Vec<usize>);
+    type Output = TileOutput;
     #[inline(always)]
     fn with_simd<S: pulp::Simd>(self, _: S) -> Self::Output {
         let Self {
@@ -205,11 +213,12 @@ impl pulp::WithSimd for TileSweep<'_> {
         let mut row_top: Vec<f64> = chunk_top.chunks(chunks).map(highest).collect();
         let mut swept = 0u64;
         let mut rapid = vec![];
+        let mut cuts = vec![];
         let x_first = grid.x0 + (ci0 as f64 + 0.5) * grid.pitch;
         for &k in bin {
             let sw = &sweeps[k as usize];
             let is_rapid = segs[k as usize].kind == SegmentKind::Rapid;
-            let mut lowered = false;
+            let mut drop = 0.0f64;
             for j in 0..h {
                 let y = grid.y0 + ((cj0 + j) as f64 + 0.5) * grid.pitch;
                 let Some((lo, hi)) = sw.row_span(y) else { continue };
@@ -237,20 +246,23 @@ impl pulp::WithSimd for TileSweep<'_> {
                     if *top <= sw.floor(xa, xb, y) {
                         continue;
                     }
-                    let (_, low) = sw.row(y, xa, grid.pitch, &mut row[first..=last]);
+                    let (_, d) = sw.row(y, xa, grid.pitch, &mut row[first..=last]);
                     *top = highest(&row[c * CHUNK..((c + 1) * CHUNK).min(w)]);
-                    lowered |= low;
+                    drop = drop.max(d);
                     row_lowered = true;
                 }
                 if row_lowered {
                     row_top[j] = highest(tops);
                 }
             }
-            if lowered && is_rapid {
+            if drop > LOWERED_MM && is_rapid {
                 rapid.push(k as usize);
             }
+            if drop > CUT_MM {
+                cuts.push(k as usize);
+            }
         }
-        (cells, swept, rapid)
+        (cells, swept, rapid, cuts)
     }
 }
 
@@ -289,6 +301,7 @@ mod tests {
                 },
                 line: k,
                 tool: 0,
+                feed_mm_min: 100.0,
             })
             .collect();
         for bit in [

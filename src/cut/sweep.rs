@@ -56,6 +56,9 @@ pub struct Segment {
     /// The tool in the spindle (the number of the last `T… M6`; 0 before any).
     #[serde(default)]
     pub tool: u32,
+    /// The programmed feed, mm/min (0 for a rapid).
+    #[serde(default)]
+    pub feed_mm_min: f64,
 }
 
 /// Horizontal length below which a segment counts as vertical, mm (0.1 nm).
@@ -67,6 +70,11 @@ pub const BULL_TOLERANCE_MM: f64 = 1e-9;
 /// A cell counts as lowered by a segment (for the report of rapids that cut) only when by more than this, mm
 /// (1 nm): a retract from the bottom of a cut re-sweeps the end sphere the cut already left, up to rounding.
 pub const LOWERED_MM: f64 = 1e-6;
+
+/// A segment cuts (for the figures of time spent feeding through air) only when it lowers some cell by more
+/// than this when it runs, mm (1 µm): above the simplification tolerance, so that retracing a surface along
+/// slightly different chords is not cutting.
+pub const CUT_MM: f64 = 1e-3;
 
 /// One segment prepared for sweeping: endpoints ordered so that `dz ≥ 0`, constants of the closed forms.
 #[derive(Clone, Copy, Debug)]
@@ -209,9 +217,9 @@ impl Sweep {
     }
 
     /// `row[i] = min(row[i], sweep at (x0 + i·pitch, y))` for every cell of a row; returns the number of cells
-    /// the footprint covers and whether any cell was lowered.
+    /// the footprint covers and the most any cell was lowered, mm (0 when none was).
     #[inline(always)]
-    pub fn row(&self, y: f64, x0: f64, pitch: f64, row: &mut [f64]) -> (usize, bool) {
+    pub fn row(&self, y: f64, x0: f64, pitch: f64, row: &mut [f64]) -> (usize, f64) {
         assert!(i32::try_from(row.len()).is_ok(), "a row of {} cells", row.len());
         let ey = y - self.ay;
         let ex0 = x0 - self.ax;
@@ -222,7 +230,7 @@ impl Sweep {
         // the two must agree there, or a tip the drop-cutter holds up by a rim cell never lowers that cell
         let rim = r2 * 1e-12;
         let mut hits = 0;
-        let mut lowered = false;
+        let mut drop = 0.0f64;
         match self.bit {
             // (selects and non-short-circuit `&`, with the column counted in `i32`, so that the loops
             // compile to vector instructions)
@@ -240,7 +248,7 @@ impl Sweep {
                     let inside = (rp2 >= -rim) & (s >= -rim);
                     let c = *cell;
                     hits += inside as usize;
-                    lowered |= inside & (z < c - LOWERED_MM);
+                    drop = drop.max(if inside { c - z } else { 0.0 });
                     *cell = if inside & (z < c) { z } else { c };
                 }
             }
@@ -256,7 +264,7 @@ impl Sweep {
                     let z = az + t * dz;
                     let c = *cell;
                     hits += inside as usize;
-                    lowered |= inside & (z < c - LOWERED_MM);
+                    drop = drop.max(if inside { c - z } else { 0.0 });
                     *cell = if inside & (z < c) { z } else { c };
                 }
             }
@@ -282,14 +290,14 @@ impl Sweep {
                         continue;
                     }
                     let z = self.bull_min(h2, tp, lo, hi);
-                    lowered |= z < *cell - LOWERED_MM;
+                    drop = drop.max(*cell - z);
                     if z < *cell {
                         *cell = z;
                     }
                 }
             }
         }
-        (hits, lowered)
+        (hits, drop)
     }
 
     /// Minimum of the convex `f(t) = z(t) + prof(ρ(t))` over `[lo, hi]` by bisection on the sign of `f'`,

@@ -17,12 +17,14 @@
 //! coordinates (`G0 Z<safe>`), not `G53 G0 Z0`: machine Z0 is the top of travel only on a homed machine, and
 //! many desktop GRBL routers run without homing; a job cannot run without its work Z0 set anyway.
 //!
-//! **Tool changes** ([`Move::ToolChange`]). LinuxCNC: `T<n> M6` then `G43 H<n>` (its tool table holds the
-//! length). GRBL 1.1 has no `M6` (it reads a `T` word and ignores it): the first tool is named in a comment
-//! and a `T<n>` line (the operator mounts it and sets Z0 on the stock top before starting); every later one is
-//! a `T<n> M0` pause preceded by a `(MSG,…)` comment that GRBL shows to the operator, asking for the tool and
-//! a Z re-touch. `brdfmill simulate` reads `T<n> M0` on one line as that manual change. One file with pauses keeps the work
-//! coordinates and the program's order in one place; see `machines/README.md`.
+//! **Tool changes** ([`Move::ToolChange`]). LinuxCNC: `G53 G0 Z<profile>` (up in machine coordinates, the
+//! only height that is safe whatever the work offset and the old tool's length), `T<n> M6`, then `G43 H<n>`
+//! (the tool table written beside the program holds the length). GRBL 1.1 has no `M6` (it reads a `T` word
+//! and ignores it): the first tool is named in a comment and a `T<n>` line (the operator mounts it and sets
+//! Z0 before starting). A job with several tools is written as one GRBL program per tool
+//! (`crate::stages::toolpath::files`), each starting with its first tool; only the joined text a job reads
+//! back holds later tools, each as a `T<n> M0` manual change after a `(MSG,…)` comment, which `brdfmill
+//! simulate` reads as that change.
 //!
 //! **Arcs** ([`Move::Arc`]). `G2`/`G3` with the plane word (`G18`, `G19`) written when it changes and
 //! `G17` restored before `M30`; the end point and the centre come on the resolution already (the fitter
@@ -115,6 +117,8 @@ pub struct Setup<'a> {
     pub path_tolerance_mm: f64,
     /// The machine's resolution, mm: coordinates are written on multiples of it.
     pub resolution_mm: f64,
+    /// LinuxCNC: the machine-coordinate Z a tool change retracts to first (`G53 G0 Z…`), mm.
+    pub tool_change_machine_z_mm: f64,
 }
 
 /// The modal state of the controller as far as the emitter knows it.
@@ -190,7 +194,7 @@ pub fn emit(setup: &Setup, moves: &[Move]) -> String {
                 number,
                 diameter_mm,
                 kind,
-            } => tool_change(&mut out, &mut m, setup.dialect, number, diameter_mm, kind),
+            } => tool_change(&mut out, &mut m, setup, number, diameter_mm, kind),
             Move::Arc(a) => arc(&mut out, &mut m, &a),
         }
     }
@@ -202,11 +206,13 @@ pub fn emit(setup: &Setup, moves: &[Move]) -> String {
 }
 
 /// A tool change per dialect (see the module documentation); the position is unknown afterwards.
-fn tool_change(out: &mut String, m: &mut Modal, dialect: Dialect, number: u32, diameter_mm: f64, kind: &str) {
+fn tool_change(out: &mut String, m: &mut Modal, setup: &Setup, number: u32, diameter_mm: f64, kind: &str) {
     let d = num(diameter_mm, 3);
-    match dialect {
+    match setup.dialect {
         Dialect::Linuxcnc => {
             let _ = writeln!(out, "{}", comment_line(&format!("tool T{number}: {kind} D{d} mm")));
+            // up in machine coordinates first, wherever the work offset and the old tool's length put it
+            let _ = writeln!(out, "G53 G0 Z{}", num(setup.tool_change_machine_z_mm, 3));
             let _ = writeln!(out, "T{number} M6");
             let _ = writeln!(out, "G43 H{number}");
         }
@@ -215,7 +221,7 @@ fn tool_change(out: &mut String, m: &mut Modal, dialect: Dialect, number: u32, d
                 out,
                 "{}",
                 comment_line(&format!(
-                    "tool T{number}: {kind} D{d} mm - mount it, set Z0 on the stock top"
+                    "tool T{number}: {kind} D{d} mm - mount it, set Z0 on the touch-off pad"
                 ))
             );
             let _ = writeln!(out, "T{number}");
@@ -238,6 +244,24 @@ fn tool_change(out: &mut String, m: &mut Modal, dialect: Dialect, number: u32, d
     m.xyz = Default::default();
     m.motion = None;
     m.feed = None;
+}
+
+/// LinuxCNC's tool table for every tool of `machine` (`T<n> P<pocket> D<diameter> Z<length> ;comment`): the
+/// lengths are 0, to be measured on the machine (`G43 H<n>` then applies what the operator set); the
+/// comment names the profile's id, made safe for a comment. `rs274 -t` reads it.
+pub fn tool_table(machine: &crate::cut::machine::Machine) -> String {
+    let mut out = String::new();
+    for t in &machine.tools {
+        let _ = writeln!(
+            out,
+            "T{n} P{n} D{} Z0 ;{} {}",
+            num(t.diameter_mm(), 4),
+            comment_text(&t.id),
+            t.shape.kind(),
+            n = t.number
+        );
+    }
+    out
 }
 
 /// The fewest decimals (at most 6) that write every multiple of the resolution `q` exactly: 3 for 0.001 mm,
@@ -384,6 +408,7 @@ mod tests {
             header,
             path_tolerance_mm: 0.001,
             resolution_mm: 1e-4,
+            tool_change_machine_z_mm: 0.0,
         }
     }
 
@@ -482,7 +507,7 @@ mod tests {
         };
         let moves = [tc, Move::Rapid([1.0, 2.0, 5.0]), tc, Move::Rapid([1.0, 2.0, 5.0])];
         let l = emit(&setup(Dialect::Linuxcnc, &[]), &moves);
-        assert_eq!(l.matches("T3 M6\nG43 H3\nG0 Z5\nX1 Y2\n").count(), 2, "{l}");
+        assert_eq!(l.matches("G53 G0 Z0\nT3 M6\nG43 H3\nG0 Z5\nX1 Y2\n").count(), 2, "{l}");
         let g = emit(&setup(Dialect::Grbl, &[]), &moves);
         assert!(!g.contains("M6") && !g.contains("G43"), "{g}");
         assert_eq!(

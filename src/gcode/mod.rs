@@ -21,6 +21,8 @@ pub(crate) mod modal;
 pub mod moves;
 pub mod program;
 
+pub use emit::tool_table;
+
 use serde::{Deserialize, Serialize};
 
 /// Controller dialect of a program.
@@ -31,4 +33,14 @@ pub enum Dialect {
     Grbl,
     /// LinuxCNC: `G64 P<tolerance>` path blending, `M2`.
     Linuxcnc,
+}
+
+impl Dialect {
+    /// The controller's name for people: "GRBL", "LinuxCNC".
+    pub fn name(self) -> &'static str {
+        match self {
+            Dialect::Grbl => "GRBL",
+            Dialect::Linuxcnc => "LinuxCNC",
+        }
+    }
 }

@@ -22,7 +22,8 @@ pub enum Move {
     /// A comment line.
     Comment(&'static str),
     /// A tool change to the tool numbered `number` (a `kind` bit of `diameter_mm`), written per dialect by
-    /// `crate::gcode::emit`: LinuxCNC `T M6 G43 H`, GRBL an `M0` pause with the instruction. The move list
+    /// `crate::gcode::emit`: LinuxCNC `G53 G0 Z`, `T M6`, `G43 H`; GRBL a program of its own per tool
+    /// (`crate::stages::toolpath::files`; in the joined text, an `M0` manual change). The move list
     /// around it already holds the `M5` and the retract before it, and the spindle start after it.
     ToolChange {
         /// Tool number in the machine's table (the `T`/`H` word).

@@ -46,7 +46,10 @@ impl<'a> Out<'a> {
     pub(super) fn write(&mut self, name: &str, bytes: &[u8]) -> Result<(), JobError> {
         let p = self.dir.join(name);
         crate::base::io::write_atomic(&p, bytes)?;
-        self.written.push(p);
+        // a file rewritten (program.json gains the simulation's figures) is listed once
+        if !self.written.contains(&p) {
+            self.written.push(p);
+        }
         Ok(())
     }
 
@@ -124,6 +127,9 @@ fn describe(p: &Path) -> String {
                 let what = describe(Path::new(&format!("{kind}.{ext}")));
                 return format!("region `{region}`: {what}");
             }
+            if kind == "program" && ext == "nc" {
+                return format!("G-code, program {region} of the job's programs (one per tool, run in order)");
+            }
         }
     }
     match name {
@@ -138,6 +144,7 @@ fn describe(p: &Path) -> String {
         "tile.png" => "tile shaded relief",
         "tile.stl" => "faceted solid of one tile (binary STL, mm)",
         "program.nc" => "G-code",
+        "tool.tbl" => "LinuxCNC tool table for the program (lengths 0: set on the machine)",
         "program.json" => "G-code summary",
         "sim.npy" => "simulated milled heightfield, mm (NumPy)",
         "sim.png" => "simulated surface shaded relief",

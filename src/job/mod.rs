@@ -181,21 +181,21 @@ pub enum JobError {
         /// What is wrong.
         reason: String,
     },
-    /// A stage failed.
-    #[error("{stage}: {source}")]
+    /// A stage failed. Its error is in the message and not chained as a source, so that a reader of the
+    /// whole chain (`{:#}`) sees it once.
+    #[error("{stage}: {error}")]
     Stage {
         /// Which stage.
         stage: &'static str,
         /// Its error.
-        #[source]
-        source: StageError,
+        error: StageError,
     },
     /// An output could not be written.
     #[error(transparent)]
     Write(#[from] crate::base::io::WriteError),
 }
 
-/// The error of a stage, kept as the source of [`JobError::Stage`].
+/// The error of a stage, kept in [`JobError::Stage`].
 #[derive(Debug, thiserror::Error)]
 pub enum StageError {
     /// A target or base BRDF.
@@ -514,6 +514,7 @@ pub(crate) fn resolve_spec(spec: &str, dir: &Path) -> String {
 mod artifacts;
 mod outcome;
 mod runner;
+mod setup;
 mod stages;
 mod summary;
 mod targets;

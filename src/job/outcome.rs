@@ -79,6 +79,8 @@ pub struct Outcome {
     pub program: Option<toolpath::Summary>,
     /// The tile's relief (highest minus lowest point), mm (`None` before the facets).
     pub relief_mm: Option<f64>,
+    /// The setup sheet's rows (the report's "To mill this"), empty before verification.
+    pub setup: Vec<(String, String)>,
     /// Files written, in order.
     pub artifacts: Vec<PathBuf>,
     /// Bytes written in all.
@@ -105,6 +107,7 @@ pub(super) fn empty_outcome(ready: &Ready) -> Outcome {
         regions: None,
         program: None,
         relief_mm: None,
+        setup: vec![],
         artifacts: vec![],
         bytes_written: 0,
         timings: vec![],

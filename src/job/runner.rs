@@ -234,7 +234,7 @@ fn verify_single(
         arrangements: &outcome.arrangements,
     };
     let mut v = verify::run(&job.verify, &input).map_err(stage_err("verify"))?;
-    v.metrics.machine_effects = machine_effects(ready, &program.gcode, &input, &v.design)?;
+    v.metrics.machine_effects = machine_effects(ready, &program.texts(), &input, &v.design)?;
     v.metrics.notes.extend(ready.toolpath.notes.iter().cloned());
     o.write("wave.png", &v.wave_png.to_png())?;
     let metrics_json = serde_json::to_string_pretty(&v.metrics).map_err(stage_err("verify"))?;
@@ -242,12 +242,13 @@ fn verify_single(
     let mut figures = v.figures;
     figures.extend(designed.figures);
     figures.extend(sim_figures);
+    outcome.setup = super::setup::sheet(ready, &program.summary, outcome.relief_mm.unwrap_or(0.0), &dev);
     let html = report::Report {
         title: job.name.clone(),
         verdict: report::Verdict::Single(&v.metrics),
         figures,
         parameters: super::summary::parameters(ready, &nd.ndf, tile, &sim),
-        program: super::summary::program(ready, &program.summary, outcome.relief_mm.unwrap_or(0.0), &dev),
+        program: outcome.setup.clone(),
         artifacts: o.listed(),
     }
     .to_html();
@@ -261,7 +262,7 @@ fn verify_single(
 /// moved what.
 fn machine_effects(
     ready: &Ready,
-    gcode: &str,
+    programs: &[&str],
     input: &VerifyInput,
     design: &crate::base::slope::SlopeGrid,
 ) -> Result<Vec<verify::MachineEffect>, JobError> {
@@ -278,7 +279,7 @@ fn machine_effects(
             machine: Some(machine),
             ..base.clone()
         };
-        let sim = crate::stages::simulate::run(gcode, &cfg).map_err(stage_err("simulate"))?;
+        let sim = crate::stages::simulate::run_files(programs, &cfg).map_err(stage_err("simulate"))?;
         // measured with this cut's own scallop lobe (the runout's flat only when the runout is in the cut)
         let cut = VerifyInput {
             sim: &sim,
@@ -385,12 +386,13 @@ fn verify_regions(
     figures.extend(design_figures);
     figures.extend(sim_figures);
     let ndfs: Vec<&crate::stages::ndf::Ndf> = run.nds.iter().map(|n| &n.ndf).collect();
+    outcome.setup = super::setup::sheet(ready, &program.summary, composed.relief_mm, &dev);
     let html = report::Report {
         title: job.name.clone(),
         verdict: report::Verdict::Regions(&metrics),
         figures,
         parameters: super::summary::region_parameters(ready, &ndfs, &tiles, &composed, &sim),
-        program: super::summary::program(ready, &program.summary, composed.relief_mm, &dev),
+        program: outcome.setup.clone(),
         artifacts: o.listed(),
     }
     .to_html();

@@ -16,10 +16,7 @@ use crate::stages::verify::report;
 
 /// A stage's error as the job's, keeping it as the source.
 pub(super) fn stage_err<E: Into<StageError>>(stage: &'static str) -> impl Fn(E) -> JobError {
-    move |e| JobError::Stage {
-        stage,
-        source: e.into(),
-    }
+    move |e| JobError::Stage { stage, error: e.into() }
 }
 
 /// The NDF stage's products.
@@ -87,7 +84,7 @@ pub(super) fn program_and_cut(
     progress: &mut dyn FnMut(Progress),
 ) -> Result<Option<Cut>, JobError> {
     o.start(progress, Stage::Toolpath);
-    let program = toolpath_stage(ready, design, o)?;
+    let mut program = toolpath_stage(ready, design, o)?;
     o.done(progress, Stage::Toolpath)?;
     outcome.program = Some(program.summary.clone());
     if until == Stage::Toolpath {
@@ -95,17 +92,22 @@ pub(super) fn program_and_cut(
     }
     o.start(progress, Stage::Simulate);
     let shape = ready.toolpath.cutting_shape();
-    let (sim, dev, figures) = simulate_stage(ready, shape, &program.gcode, design, design_file, o)?;
+    let (sim, dev, figures) = simulate_stage(ready, shape, &program, design, design_file, o)?;
     let sim_ideal = match sim.stats.accuracy {
         Some(_) => {
             let cfg = crate::stages::simulate::SimulateConfig {
                 ideal: true,
                 ..ready.job.simulate.config(&ready.toolpath)
             };
-            Some(simulate::run(&program.gcode, &cfg).map_err(stage_err("simulate"))?)
+            Some(simulate::run_files(&program.texts(), &cfg).map_err(stage_err("simulate"))?)
         }
         None => None,
     };
+    // the air the simulation found, beside the program's numbers
+    program.summary.air_feed_mm = Some(sim.stats.air_feed_mm);
+    program.summary.air_feed_s = Some(sim.stats.air_feed_s);
+    outcome.program = Some(program.summary.clone());
+    write_summary(&program.summary, o)?;
     o.done(progress, Stage::Simulate)?;
     if until == Stage::Simulate {
         return Ok(None);
@@ -119,13 +121,30 @@ pub(super) fn program_and_cut(
     }))
 }
 
-/// The design heightfield → `program.nc`, `program.json`.
+/// LinuxCNC's tool table beside the program (`rs274 -t tool.tbl`, or the machine's `[EMCIO] TOOL_TABLE`).
+pub(super) const TOOL_TABLE_FILE: &str = "tool.tbl";
+
+/// The design heightfield → `program.nc` (GRBL with several tools: `program-1.nc`, `program-2.nc`, … one per
+/// tool), `tool.tbl` for LinuxCNC, `program.json`.
 fn toolpath_stage(ready: &Ready, design: &Heightfield, o: &mut Out) -> Result<toolpath::Toolpath, JobError> {
     let program = ready.toolpath.run(design).map_err(stage_err("toolpath"))?;
-    o.write("program.nc", program.gcode.as_bytes())?;
-    let summary = serde_json::to_string_pretty(&program.summary).map_err(stage_err("toolpath"))?;
-    o.write("program.json", summary.as_bytes())?;
+    for f in &program.files {
+        o.write(&f.summary.file, f.gcode.as_bytes())?;
+    }
+    if ready.machine.dialect == crate::gcode::Dialect::Linuxcnc {
+        o.write(
+            TOOL_TABLE_FILE,
+            crate::gcode::emit::tool_table(&ready.machine).as_bytes(),
+        )?;
+    }
+    write_summary(&program.summary, o)?;
     Ok(program)
+}
+
+/// `program.json`.
+fn write_summary(s: &toolpath::Summary, o: &mut Out) -> Result<(), JobError> {
+    let summary = serde_json::to_string_pretty(s).map_err(stage_err("toolpath"))?;
+    o.write("program.json", summary.as_bytes())
 }
 
 /// `target` → NDF: the base lobe (the finishing raster's scallop lobe by default), Lucy–Richardson,
@@ -220,14 +239,14 @@ pub(super) fn facets_stage(n: &Ndf, tile: Tile, suffix: &str, o: &mut Out) -> Re
 fn simulate_stage(
     ready: &Ready,
     shape: Shape,
-    gcode: &str,
+    program: &toolpath::Toolpath,
     design: &Heightfield,
     design_file: &str,
     o: &mut Out,
 ) -> Result<(Simulation, Deviation, [report::Figure; 2]), JobError> {
     let job = &ready.job;
     let scfg = job.simulate.config(&ready.toolpath);
-    let sim = simulate::run(gcode, &scfg).map_err(stage_err("simulate"))?;
+    let sim = simulate::run_files(&program.texts(), &scfg).map_err(stage_err("simulate"))?;
     let dev = simulate::deviation(&sim, design, &shape);
     o.npy("sim.npy", &sim.heightfield)?;
     let sim_canvas = sim.heightfield.relief_png("simulated milled surface", 1024);
@@ -259,9 +278,15 @@ fn simulate_stage(
     o.write("deviation.png", &dev_figure.png)?;
     o.write(
         "sim.json",
-        SimFile::new(&sim, &scfg, "program.nc", Some(&dev), Some(design_file.into()))
-            .to_json()
-            .as_bytes(),
+        SimFile::new(
+            &sim,
+            &scfg,
+            &program.summary.file_names().join(" + "),
+            Some(&dev),
+            Some(design_file.into()),
+        )
+        .to_json()
+        .as_bytes(),
     )?;
     Ok((sim, dev, [sim_figure, dev_figure]))
 }

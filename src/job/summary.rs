@@ -1,10 +1,9 @@
-//! The report's tables of what was run: the job's parameters and the G-code program's numbers.
+//! The report's table of what was run: the job's parameters (the setup sheet is `setup`).
 
 use super::Ready;
 use crate::stages::facets::Tile;
 use crate::stages::ndf::Ndf;
-use crate::stages::simulate::{Deviation, Simulation};
-use crate::stages::toolpath::{self, Summary};
+use crate::stages::simulate::Simulation;
 
 /// The parameters table.
 pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) -> Vec<(String, String)> {
@@ -137,7 +136,6 @@ pub(super) fn region_parameters(
     rows
 }
 
-/// The G-code table: "To mill this" — what a machinist needs first, then the program's numbers.
 /// The tile's relief against its budget, and what kept it there.
 fn relief_line(job: &super::Job, tile: &Tile) -> String {
     let (lo, hi) = tile.heightfield.range();
@@ -157,58 +155,4 @@ fn relief_line(job: &super::Job, tile: &Tile) -> String {
             "the annealed arrangement (step term) and the Poisson heights stayed within it unaided"
         }
     )
-}
-
-pub(super) fn program(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation) -> Vec<(String, String)> {
-    let job = &ready.job;
-    let t = &job.toolpath;
-    let tools = t.tools_in_order();
-    vec![
-        ("program".into(), "program.nc (summary in program.json)".into()),
-        ("estimated time".into(), toolpath::hms(s.estimated_s)),
-        ("tools, in order".into(), tools),
-        (
-            "stock and relief".into(),
-            format!(
-                "{:?}, at least {} × {} mm; the relief is {:.3} mm deep (the design), the program cuts to {:.3} mm",
-                t.stock, t.area_mm[0], t.area_mm[1], relief_mm, s.depth_mm
-            ),
-        ),
-        (
-            "work zero".into(),
-            "X0 Y0 at the lower-left corner of the area, Z0 on the stock top (touch off there)".into(),
-        ),
-        (
-            "check, then stream".into(),
-            "brdfmill stream program.nc --port PORT --check: GRBL's check mode ($C) runs every line first without moving, and the job streams only if none errs (docs/MILLING.md)"
-                .into(),
-        ),
-        ("lines".into(), s.lines.to_string()),
-        (
-            "stepover".into(),
-            format!("{:.4} mm (scallop {:.3} µm)", s.stepover_mm, s.scallop_um),
-        ),
-        (
-            "passes".into(),
-            format!(
-                "{} finishing, {} roughing layers",
-                s.finishing_passes, s.roughing_layers
-            ),
-        ),
-        (
-            "path".into(),
-            format!("{:.1} mm cutting, {:.1} mm rapid", s.feed_length_mm, s.rapid_length_mm),
-        ),
-        (
-            "feed / spindle".into(),
-            format!("{} mm/min, {} rpm", s.feed_mm_min, s.spindle_rpm),
-        ),
-        (
-            "gouge (simulated)".into(),
-            format!(
-                "{:.2} µm at most below the design in the simulated cut (the figure under Deviation from the design)",
-                dev.max_under_um.max(0.0)
-            ),
-        ),
-    ]
 }

@@ -469,10 +469,11 @@ pub fn coupon(machine: &Machine, cfg: &CalibrateConfig) -> Result<Coupon, Calibr
         header: &header,
         path_tolerance_mm: l.path_tolerance_mm,
         resolution_mm: q,
+        tool_change_machine_z_mm: machine.program.tool_change_machine_z_mm,
     };
     let gcode = emit::emit(&setup, &moves);
     let sheet = sheet(&spec);
-    let tool_table = (machine.dialect == Dialect::Linuxcnc).then(|| tool_table(machine));
+    let tool_table = (machine.dialect == Dialect::Linuxcnc).then(|| emit::tool_table(machine));
     Ok(Coupon {
         moves,
         start_mm: start,
@@ -519,23 +520,6 @@ fn header(s: &CouponSpec) -> Vec<String> {
             s.blocks
         ),
     ]
-}
-
-/// LinuxCNC's tool table for the profile's tools: `T<n> P<n> D<diameter> Z0 ;<id> <kind>` (lengths are set
-/// by touching off, so every offset is 0).
-fn tool_table(machine: &Machine) -> String {
-    let mut out = String::new();
-    for t in &machine.tools {
-        let _ = writeln!(
-            out,
-            "T{n} P{n} D{} Z0 ;{} {}",
-            emit::num(t.diameter_mm(), 4),
-            emit::comment_text(&t.id),
-            t.shape.kind(),
-            n = t.number
-        );
-    }
-    out
 }
 
 /// The keys the sheet sets and their formulas (measurements in mm), those of the profile and the controller's.

@@ -27,7 +27,8 @@
 //! parameters, `[ ]` expressions, `O` words, block delete `/`, two words of one modal group or two of one letter
 //! on a line, a feed move without a feed rate, an arc whose end radius differs from its start radius beyond
 //! the dialect's tolerance), and what a controller reads but the simulation does not model: work offsets
-//! (`G10`, `G92`, `G55`–`G59`, `G43.1`), machine coordinates (`G53`), stored positions (`G28`, `G30`),
+//! (`G10`, `G92`, `G55`–`G59`, `G43.1`), machine coordinates (`G53`, but for `G53 G0 Z…` alone: a tool
+//! change's retract, read as straight up to at least the start height), stored positions (`G28`, `G30`),
 //! probing (`G38.x`) and inverse-time feed (`G93`).
 //!
 //! The program's own positions are work coordinates; the tool starts at [`ParseOptions::start_mm`] (LinuxCNC's
@@ -182,17 +183,63 @@ pub fn parse(text: &str, opt: &ParseOptions) -> Result<Motion, GcodeError> {
     Ok(prog)
 }
 
+/// `G53 G0 Z…` alone: the retract in machine coordinates a LinuxCNC tool change starts with.
+fn machine_retract(p: &Parsed) -> bool {
+    matches!(p.non_modal, Some((NonModal::Machine, _)))
+        && matches!(p.motion, Some((MotionMode::Rapid, _)))
+        && p.get('Z').is_some()
+        && p.get('X').is_none()
+        && p.get('Y').is_none()
+}
+
+/// Read the programs of a job that run one after another on the same stock (GRBL's one program per tool),
+/// each from [`ParseOptions::start_mm`] with the tool its first `T` word names: their motion in order, line
+/// numbers counted on through the files (an error names the program too).
+pub fn parse_all(texts: &[&str], opt: &ParseOptions) -> Result<Motion, GcodeError> {
+    let mut all = Motion::default();
+    let n = texts.len();
+    for (k, text) in texts.iter().enumerate() {
+        let mut p = parse(text, opt).map_err(|e| GcodeError {
+            message: if n > 1 {
+                format!("program {} of {n}: {}", k + 1, e.message)
+            } else {
+                e.message
+            },
+            line: e.line,
+            column: e.column,
+        })?;
+        let offset = all.lines as u32;
+        p.segments.iter_mut().for_each(|s| s.line += offset);
+        all.segments.append(&mut p.segments);
+        all.moves.append(&mut p.moves);
+        all.end_line = p.end_line.map(|l| l + all.lines);
+        all.lines += p.lines;
+        all.motions += p.motions;
+        all.arcs += p.arcs;
+        all.inch |= p.inch;
+        all.end_mm = p.end_mm;
+        if all.segments.len() > opt.max_segments {
+            return Err(at(
+                all.lines,
+                0,
+                format!("more than {} linear segments", opt.max_segments),
+            ));
+        }
+    }
+    Ok(all)
+}
+
 /// What a controller reads but the simulation does not model, refused at its word.
 fn not_simulated(p: &Parsed, lineno: usize) -> Result<(), GcodeError> {
     let refuse = |col: usize, m: &str| Err(at(lineno, col, m));
-    if let Some((n, col)) = p.non_modal {
+    if let Some((n, col)) = p.non_modal.filter(|_| !machine_retract(p)) {
         return refuse(
             col,
             match n {
                 NonModal::GoStored(_) | NonModal::SetStored(_) => {
                     "home positions (G28/G30) are machine-specific and not simulated"
                 }
-                NonModal::Machine => "machine coordinates (G53) are not supported",
+                NonModal::Machine => "machine coordinates (G53) are supported only as `G53 G0 Z…` alone, a retract",
                 NonModal::SetOffset | NonModal::ClearOffset => "coordinate offsets (G92) are not supported",
                 NonModal::SetCoord => "coordinate system offsets (G10) are not supported",
             },
@@ -257,6 +304,17 @@ fn block(
         }
     }
     let before = prog.segments.len();
+    if machine_retract(p) {
+        // where machine Z is in work coordinates the simulation cannot know; a retract to it goes up on a
+        // machine homed at the top of its travel: straight up to the start height at least
+        let to = [step.from[0], step.from[1], step.from[2].max(opt.start_mm[2])];
+        push_line(prog, st.tool, step.from, to, SegmentKind::Rapid, lineno, None);
+        st.interp.pos = to;
+        if prog.segments.len() > before {
+            prog.motions += 1;
+        }
+        return Ok(p.program_end);
+    }
     match motion {
         interp::Motion::Line { mode, to, feed_mm_min } => {
             let (kind, feed) = match mode {
@@ -316,6 +374,7 @@ fn push_line(prog: &mut Motion, tool: u32, from: P3, to: P3, kind: SegmentKind, 
         kind,
         line: line as u32,
         tool,
+        feed_mm_min: feed.unwrap_or(0.0),
     });
     prog.moves.push(match feed {
         None => Move::Rapid(to),
@@ -412,6 +471,50 @@ mod tests {
         assert_eq!(g.segments[1].to, [2.0, 2.5, -0.5]);
         assert_eq!(g.segments[1].line, 5);
         assert_eq!(g.end_line, Some(6), "the second % ends the program");
+    }
+
+    /// `G53 G0 Z…` alone is a retract straight up to at least the start height; any other use of G53 is
+    /// refused at its word.
+    #[test]
+    fn a_machine_coordinate_retract_goes_straight_up() {
+        let opt = ParseOptions {
+            start_mm: [0.0, 0.0, 5.0],
+            ..Default::default()
+        };
+        let g = parse("G0 X1 Y2 Z-0.5\nG53 G0 Z0\nT2 M6\nG0 Z5\n", &opt).unwrap();
+        assert_eq!(g.segments[1].from, [1.0, 2.0, -0.5]);
+        assert_eq!(g.segments[1].to, [1.0, 2.0, 5.0]);
+        assert_eq!(g.segments[1].kind, SegmentKind::Rapid);
+        assert_eq!(g.segments.len(), 2, "already at the start height: no move");
+        for bad in ["G53 G0 X1 Z0\n", "G53 G1 Z0 F100\n", "G0 G53 Y3\n"] {
+            let e = parse(bad, &opt).unwrap_err();
+            assert!(e.message.contains("G53"), "{bad}: {e}");
+        }
+    }
+
+    /// Programs read one after another continue on one stock, each from the start with its own tool, and an
+    /// error names the program.
+    #[test]
+    fn programs_in_sequence() {
+        let opt = ParseOptions {
+            start_mm: [0.0, 0.0, 5.0],
+            ..Default::default()
+        };
+        let g = parse_all(
+            &["T3\nG0 Z5\nG1 Z-1 F10\nM30\n", "T1\nG0 Z5\nX1\nG1 Z-2 F10\nM30\n"],
+            &opt,
+        )
+        .unwrap();
+        let tools: Vec<u32> = g.segments.iter().map(|s| s.tool).collect();
+        assert_eq!(tools, [3, 1, 1]);
+        assert_eq!(
+            g.segments[1].from,
+            [0.0, 0.0, 5.0],
+            "the second program starts from the start"
+        );
+        assert_eq!(g.segments[2].line, 4 + 4, "lines count on through the files");
+        let e = parse_all(&["G0 Z5\n", "G0 Z5\nG1 X1\n"], &opt).unwrap_err();
+        assert!(e.message.starts_with("program 2 of 2") && e.line == 2, "{e}");
     }
 
     #[test]

@@ -25,15 +25,17 @@
 //! assert!((lo + 0.2).abs() < 1e-12);
 //! ```
 
+mod air;
 pub mod deviation;
 pub mod gcode;
 
+pub use air::{air_feeds, cut_and_air_mm};
 pub use deviation::{deviation, Deviation};
 
 use crate::base::heightfield::Heightfield;
 use crate::cut::machine::{Accuracy, Machine};
+use crate::cut::stock;
 pub use crate::cut::tool::Shape;
-use crate::cut::{stock, sweep};
 use crate::gcode::moves::P3;
 use gcode::{Motion, ParseOptions};
 use serde::{Deserialize, Serialize};
@@ -267,6 +269,13 @@ pub struct SimStats {
     pub feed_length_mm: f64,
     /// Rapid path length, mm.
     pub rapid_length_mm: f64,
+    /// Feed path that removed nothing when it ran (air: approaches, links and retraces above the stock as it
+    /// stood then; [`crate::cut::sweep::CUT_MM`]), mm.
+    #[serde(default)]
+    pub air_feed_mm: f64,
+    /// The time of that path at its programmed feeds, s.
+    #[serde(default)]
+    pub air_feed_s: f64,
     /// Largest chord sagitta of the arcs' linearisation, µm.
     pub arc_tolerance_um: f64,
     /// The machine's errors the cut followed (backlash, runout, step grid); absent: a perfect machine.
@@ -386,8 +395,13 @@ pub fn parse_options(cfg: &SimulateConfig) -> ParseOptions {
 
 /// Parse and simulate a program held in memory.
 pub fn run(program: &str, cfg: &SimulateConfig) -> Result<Simulation, SimulateError> {
+    run_files(&[program], cfg)
+}
+
+/// Parse and simulate programs that run one after another on the same stock ([`gcode::parse_all`]).
+pub fn run_files(programs: &[&str], cfg: &SimulateConfig) -> Result<Simulation, SimulateError> {
     cfg.validate()?;
-    let prog = gcode::parse(program, &parse_options(cfg))?;
+    let prog = gcode::parse_all(programs, &parse_options(cfg))?;
     simulate(&prog, cfg)
 }
 
@@ -488,6 +502,7 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
     let grid = stock_grid(prog, cfg)?;
     let top = cfg.stock_top_mm;
     let (z, rep, tool_cuts) = sweep_tools(&grid, top, cfg, path);
+    let air = air_feeds(&path.segments, &rep.cut_segments);
     let area = grid.pitch * grid.pitch;
     let removed: f64 = z.iter().map(|v| (top - v).max(0.0)).sum::<f64>() * area;
     let min_z = z.iter().copied().fold(f64::INFINITY, f64::min);
@@ -528,6 +543,8 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
         min_z_mm: min_z,
         feed_length_mm: len.feed_mm,
         rapid_length_mm: len.rapid_mm,
+        air_feed_mm: air.0,
+        air_feed_s: air.1,
         arc_tolerance_um: cfg.arc_tolerance_um,
         accuracy: (!acc.is_perfect()).then_some(acc),
     };
@@ -545,60 +562,26 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
     })
 }
 
-/// Cutting and air length of feed segments over a stock surface already cut (`before`, on its grid), mm:
-/// a segment cuts when its sweep lowers some cell of `before` by more than 1 µm (more than the
-/// simplification tolerance, so retracing a surface along slightly different chords is not cutting); every
-/// other feed segment is air (it retraces the surface or moves above it).
-/// This measures a roughing level against the stock its previous levels left.
-pub fn cut_and_air_mm(before: &Simulation, bit: Shape, segs: &[gcode::Segment]) -> (f64, f64) {
-    use rayon::prelude::*;
-    let hf = &before.heightfield;
-    let (x0, y0, p) = (before.origin_mm[0], before.origin_mm[1], hf.pitch_mm);
-    segs.par_iter()
-        .filter(|s| s.kind != gcode::SegmentKind::Rapid)
-        .map(|s| {
-            let len = crate::gcode::moves::dist(s.from, s.to);
-            let sw = sweep::Sweep::new(bit, s.from, s.to);
-            let [fx0, fy0, fx1, fy1] = sw.footprint();
-            let clamp = |v: f64, n: usize| v.clamp(0.0, n as f64) as usize;
-            let (i0, i1) = (
-                clamp(((fx0 - x0) / p).floor(), hf.nx),
-                clamp(((fx1 - x0) / p).ceil(), hf.nx),
-            );
-            let (j0, j1) = (
-                clamp(((fy0 - y0) / p).floor(), hf.ny),
-                clamp(((fy1 - y0) / p).ceil(), hf.ny),
-            );
-            let mut row = vec![0.0; i1.saturating_sub(i0)];
-            for j in j0..j1 {
-                let orig = &hf.z_mm[j * hf.nx + i0..j * hf.nx + i1];
-                row.copy_from_slice(orig);
-                let y = y0 + (j as f64 + 0.5) * p;
-                sw.row(y, x0 + (i0 as f64 + 0.5) * p, p, &mut row);
-                if row.iter().zip(orig).any(|(a, b)| *a < b - 1e-3) {
-                    return (len, 0.0);
-                }
-            }
-            (0.0, len)
-        })
-        // added in program order, whatever the schedule
-        .collect::<Vec<_>>()
-        .into_iter()
-        .fold((0.0, 0.0), |a, b| (a.0 + b.0, a.1 + b.1))
-}
-
-/// Sweep each tool's segments with its own shape; the stock is the lowest of their cuts (a sweep only
-/// lowers cells, so the order of the tools does not matter). Returns the heights, a report whose
-/// `rapid_cuts` are program *lines*, and each tool's own cut when there is more than one tool.
+/// Sweep each tool's segments with its own shape, in program order, the stock carried from one tool to the
+/// next. Returns the heights, a report whose `rapid_cuts` are program *lines* and whose `cut_segments` index
+/// `prog.segments` (each measured against the stock as it stood when the segment ran), and each tool's own
+/// cut when there is more than one tool (the first tool's is the stock it left; each later one's is swept
+/// again from the top, the one extra sweep a program with several tools costs).
 fn sweep_tools(
     grid: &stock::Grid,
     top: f64,
     cfg: &SimulateConfig,
     prog: &Motion,
 ) -> (Vec<f64>, stock::SweepReport, Vec<ToolCut>) {
-    let numbers: std::collections::BTreeSet<u32> = prog.segments.iter().map(|s| s.tool).collect();
+    // tools in the order the program first uses them
+    let mut numbers: Vec<u32> = vec![];
+    for s in &prog.segments {
+        if !numbers.contains(&s.tool) {
+            numbers.push(s.tool);
+        }
+    }
     if numbers.len() <= 1 {
-        let n = numbers.into_iter().next().unwrap_or(0);
+        let n = numbers.first().copied().unwrap_or(0);
         let (z, mut rep) = stock::sweep(grid, top, cfg.shape_of(n), &prog.segments);
         rep.rapid_cuts = rep.rapid_cuts.iter().map(|&k| prog.segments[k].line as usize).collect();
         return (z, rep, vec![]);
@@ -606,23 +589,32 @@ fn sweep_tools(
     let mut z = vec![top; grid.nx * grid.ny];
     let mut rep = stock::SweepReport::default();
     let mut cuts = vec![];
-    for n in numbers {
-        let segs: Vec<gcode::Segment> = prog.segments.iter().filter(|s| s.tool == n).copied().collect();
+    for (t, n) in numbers.into_iter().enumerate() {
+        let index: Vec<usize> = (0..prog.segments.len())
+            .filter(|&k| prog.segments[k].tool == n)
+            .collect();
+        let segs: Vec<gcode::Segment> = index.iter().map(|&k| prog.segments[k]).collect();
         let shape = cfg.shape_of(n);
-        let (zn, r) = stock::sweep(grid, top, shape, &segs);
-        z.iter_mut().zip(&zn).for_each(|(a, b)| *a = a.min(*b));
+        let r = stock::sweep_into(grid, &mut z, top, shape, &segs, stock::Order::Program, |_, _| {});
         rep.swept_cells += r.swept_cells;
         rep.cutting_segments += r.cutting_segments;
         rep.rapid_cuts
             .extend(r.rapid_cuts.iter().map(|&k| segs[k].line as usize));
+        rep.cut_segments.extend(r.cut_segments.iter().map(|&k| index[k]));
+        let own = if t == 0 {
+            z.clone()
+        } else {
+            stock::sweep(grid, top, shape, &segs).0
+        };
         cuts.push(ToolCut {
             number: n,
             shape,
-            z_mm: zn,
+            z_mm: own,
             segments: segs.len(),
         });
     }
     rep.rapid_cuts.sort_unstable();
+    rep.cut_segments.sort_unstable();
     (z, rep, cuts)
 }
 

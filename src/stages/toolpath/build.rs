@@ -1,21 +1,23 @@
 //! The move-list builder: feeds capped by the machine's Z limit, safe approaches with ramped entries, and
 //! the sequence that starts, changes and stops a tool.
 //!
-//! **Entries** ([`Builder::approach`]): rapid at safe z over the start of the run, rapid down to the lead
-//! height, feed straight down at the plunge feed through air to the *entry height* `z₀ = z + 1.1·doc +
-//! 5 µm` (every level engages at most the tool's depth of cut `doc` below the stock it meets — the
-//! roughing layers by construction, the finishing levels by their stock check — so at the start `p` of a
-//! run no stock stands above the tool's lower surface placed at `z₀`: for any cell at offset `d`,
-//! `before ≤ after + doc ≤ ball_p(d) + doc`; a roughing layer lowers that to the layer before it plus the
-//! ridges its tool leaves between paths — the stock the earlier layers left —
-//! which the acceptance tests check against the simulated stock), then ramp into the material along the run
-//! itself at the
-//! tool's `max_ramp_deg` θ at most: back and forth over its first `a = Δ/(2m·tanθ)` mm in `m` legs until
-//! `Δ = z₀ − z` is descended, never below the run's own cutter locations (so never below the design). A
-//! run too short for 50 legs is entered by a straight plunge at the plunge feed, and counted.
+//! **Entries** ([`Builder::approach`]): the first entry of a tool travels at safe z, every later one rises
+//! only to the retract height (0.5 mm above the stock top, which nothing over the work stands above) and
+//! travels there; a rapid down to that height over the start of the run, then straight down *through air*
+//! at the machine's Z feed to the *entry height* `z₀ = z + 1.1·doc + 5 µm` (every level engages at most the
+//! tool's depth of cut `doc` below the stock it meets — the roughing layers by construction, the finishing
+//! levels by their stock check — so at the start `p` of a run no stock stands above the tool's lower
+//! surface placed at `z₀`: for any cell at offset `d`, `before ≤ after + doc ≤ ball_p(d) + doc`; a roughing
+//! layer lowers that to the layer before it plus the ridges its tool leaves between paths — the stock the
+//! earlier layers left — which the acceptance tests check against the simulated stock; the final raster,
+//! whose stock the builder has swept, lowers it to 5 µm above the stock's own cutter location at `p`), then
+//! ramp into the material along the run itself at the tool's `max_ramp_deg` θ at most: back and forth over
+//! its first `a = Δ/(2m·tanθ)` mm in `m` legs until `Δ = z₀ − z` is descended, never below the run's own
+//! cutter locations (so never below the design). A run too short for 50 legs is entered by a straight
+//! plunge at the plunge feed, and counted. A pass ends with a rapid straight up to the retract height.
 //!
-//! **Start of a tool** ([`Builder::start_tool`]): the tool change (LinuxCNC `T M6 G43 H`, GRBL a named
-//! first tool or an `M0` pause, written by [`crate::gcode::emit`]), a Z-only retract to the clearance
+//! **Start of a tool** ([`Builder::start_tool`]): the tool change (LinuxCNC `G53 G0 Z`, `T M6`, `G43 H`;
+//! GRBL the start of the tool's own program, written by [`crate::gcode::emit`] and split by `super::files`), a Z-only retract to the clearance
 //! height (the emitter writes it before any X/Y word because the position is unknown then), *then* the
 //! spindle at the tool's own speed with its dwell, then the coolant. **Stop of a tool**
 //! ([`Builder::stop_tool`]): feed up to the lead height, rapid to the clearance height, park at the
@@ -57,6 +59,9 @@ pub struct Builder<'m> {
     pub ramped_entries: usize,
     /// Entries plunged straight (the tool may plunge, or the run is too short for a ramp).
     pub plunged_entries: usize,
+    /// The current tool has entered the work since it started: later approaches travel at the retract
+    /// height [`LEAD_MM`] over the stock, not at the clearance height.
+    pub in_work: bool,
 }
 
 /// Most back-and-forth legs of one ramp; a run shorter than that needs is plunged into instead.
@@ -76,6 +81,7 @@ impl<'m> Builder<'m> {
             entry_ceiling_z: f64::INFINITY,
             ramped_entries: 0,
             plunged_entries: 0,
+            in_work: false,
         }
     }
 
@@ -110,38 +116,66 @@ impl<'m> Builder<'m> {
         self.at = p;
     }
 
-    /// Retract to safe z, travel at safe z over the start of `run`, rapid down to the lead height, feed down
-    /// through air to the entry height and ramp into the material along `run` (see the module
-    /// documentation). The tool ends at `run[0]`; the caller then cuts `run[1..]`.
-    pub fn approach(&mut self, run: &[P3]) {
+    /// Travel over the start of `run`, descend through air to the entry height and ramp into the material
+    /// along `run` (see the module documentation). The first approach of a tool travels at safe z; later
+    /// ones rise only to the retract height [`LEAD_MM`] above the stock top (nothing stands higher over the
+    /// work) and travel there. The descent from there to the entry height is air by construction and runs at
+    /// the machine's Z feed; `stock_cl`, where the caller knows it, is the lowest the tip can sit at `run[0]`
+    /// without touching the stock as it stands, which lowers the entry height to just above it. The tool
+    /// ends at `run[0]`; the caller then cuts `run[1..]`.
+    pub fn approach(&mut self, run: &[P3], stock_cl: Option<f64>) {
         let Some(&p) = run.first() else {
             return;
         };
-        let safe = self.safe_z();
-        if self.at[2] < safe {
-            self.rapid([self.at[0], self.at[1], safe]);
+        let travel = if self.in_work { LEAD_MM } else { self.safe_z() };
+        if self.at[2] < travel {
+            self.rapid([self.at[0], self.at[1], travel]);
         }
-        self.rapid([p[0], p[1], safe]);
+        self.rapid([p[0], p[1], self.at[2].max(travel)]);
         self.rapid([p[0], p[1], LEAD_MM.max(p[2])]);
+        self.in_work = true;
         let plunge = self.plunge_mm_min;
-        let top = (p[2] + self.entry_mm).min(self.entry_ceiling_z).min(LEAD_MM);
+        let mut top = (p[2] + self.entry_mm).min(self.entry_ceiling_z).min(LEAD_MM);
+        if let Some(s) = stock_cl {
+            top = top.min(s.min(0.0) + ENTRY_MARGIN_MM);
+        }
+        // never below the run's start (a layer's ceiling can be lower than a run that starts on the allowance)
+        let top = top.max(p[2]);
         // within the margin there is nothing to ramp through
         if top <= p[2] + ENTRY_MARGIN_MM + 1e-9 {
+            self.air_down(top);
             self.feed(p, plunge);
             return;
         }
         let legs = ramp_legs(run, top - p[2], self.ramp_tan);
         let Some(points) = legs else {
             self.plunged_entries += 1;
+            self.air_down(top);
             self.feed(p, plunge);
             return;
         };
-        self.feed([p[0], p[1], top], plunge);
+        self.air_down(top);
         let f = self.feed_mm_min;
         for q in points {
             self.feed(q, f);
         }
         self.ramped_entries += 1;
+    }
+
+    /// Straight down through air to `z` at the machine's Z feed (nothing when already there or below).
+    fn air_down(&mut self, z: f64) {
+        if z < self.at[2] - 1e-12 {
+            let f = self.machine.limits.max_feed_z_mm_min;
+            self.moves.push(Move::Feed([self.at[0], self.at[1], z], f));
+            self.at = [self.at[0], self.at[1], z];
+        }
+    }
+
+    /// Straight up out of the cut to the retract height [`LEAD_MM`], as a rapid.
+    pub fn retract(&mut self) {
+        if self.at[2] < LEAD_MM {
+            self.rapid([self.at[0], self.at[1], LEAD_MM]);
+        }
     }
 
     /// An arc at feed `f`, capped like [`Self::feed`] at its steepest point (an arc under a half turn with no
@@ -188,6 +222,7 @@ impl<'m> Builder<'m> {
             tool.max_ramp_deg.to_radians().tan()
         };
         self.entry_mm = ENTRY_DOC_FACTOR * cut.max_depth_of_cut_mm + ENTRY_MARGIN_MM;
+        self.in_work = false;
     }
 
     /// Lift out of the cut, retract to the clearance height, park, spindle and coolant off.
@@ -202,6 +237,7 @@ impl<'m> Builder<'m> {
         if let Some([x, y]) = self.machine.program.park_xy_mm {
             self.rapid([x, y, clear]);
         }
+        self.in_work = false;
         self.moves.push(Move::SpindleOff);
         if self.machine.program.coolant != Coolant::Off {
             self.moves.push(Move::Coolant(Coolant::Off));

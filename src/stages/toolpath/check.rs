@@ -8,8 +8,22 @@ use crate::gcode::moves::{bounds, chords, Move, P3};
 /// Clearance above the stock top (z = 0) below which a rapid may not go, mm.
 pub const RAPID_FLOOR_MM: f64 = 0.5;
 
-/// Check `moves` (starting at `start`) against `machine` and `tool`; `Err` names the first violation.
+/// Check `moves` (starting at `start`) against `machine` and `tool`; `Err` names the first violation. Rapids
+/// across X/Y run at `program.safe_z_mm` or above.
 pub fn check(moves: &[Move], start: P3, machine: &Machine, tool: &Tool) -> Result<(), Invalid> {
+    check_in(moves, start, machine, tool, None)
+}
+
+/// [`check`], where rapids across X/Y may also run at the retract height ([`RAPID_FLOOR_MM`] above the
+/// stock top) or above while both their ends lie over the work `[x0, y0, x1, y1]` (mm): over the stock,
+/// whose top nothing stands above; clamps and the touch-off pad lie outside it.
+pub fn check_in(
+    moves: &[Move],
+    start: P3,
+    machine: &Machine,
+    tool: &Tool,
+    work: Option<[f64; 4]>,
+) -> Result<(), Invalid> {
     // extents and feeds of arcs by their chords (both lie on them)
     let (lo, hi) = bounds(moves, start);
     let t = &machine.travel;
@@ -66,10 +80,22 @@ pub fn check(moves: &[Move], start: P3, machine: &Machine, tool: &Tool) -> Resul
             }
             Move::Rapid(p) => {
                 let moves_xy = (p[0] - at[0]).abs() > 1e-12 || (p[1] - at[1]).abs() > 1e-12;
-                if moves_xy && (p[2] < safe - 1e-9 || at[2] < safe - 1e-9) {
+                let over_work =
+                    |q: P3| work.is_some_and(|[x0, y0, x1, y1]| q[0] >= x0 && q[0] <= x1 && q[1] >= y0 && q[1] <= y1);
+                let low = p[2].min(at[2]);
+                let allowed = if over_work(p) && over_work(at) {
+                    RAPID_FLOOR_MM
+                } else {
+                    safe
+                };
+                if moves_xy && low < allowed - 1e-9 {
                     return Err(Invalid(format!(
-                        "move {n}: rapid across X/Y at z = {:.3} mm, below program.safe_z_mm = {safe} mm over the stock",
-                        p[2].min(at[2])
+                        "move {n}: rapid across X/Y at z = {low:.3} mm, below {} over the stock",
+                        if allowed == safe {
+                            format!("program.safe_z_mm = {safe} mm")
+                        } else {
+                            format!("the retract height {RAPID_FLOOR_MM} mm")
+                        }
                     )));
                 }
                 if p[2] < RAPID_FLOOR_MM - 1e-9 {

@@ -13,6 +13,7 @@
 pub(crate) mod arcs;
 mod build;
 pub mod check;
+pub mod files;
 mod plan;
 pub(crate) mod raster;
 pub(crate) mod rough;
@@ -26,7 +27,7 @@ use crate::cut::machine::{self, Machine, Stock, Tool};
 use crate::cut::{dropcutter, estimate};
 use crate::gcode::emit;
 use crate::gcode::moves::{self, Move, P3};
-use build::{Builder, LEAD_MM};
+use build::Builder;
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -71,6 +72,9 @@ pub struct ToolpathConfig {
     pub job: String,
     /// Fit `G2`/`G3` arcs in the pass plane (`G18` at 0°, `G19` at 90°; passes at other angles stay lines).
     pub arcs: bool,
+    /// The longest run the job may take, hours: a program whose estimate is longer is refused, naming what
+    /// takes the time and what would shorten it.
+    pub max_hours: f64,
 }
 
 impl Default for ToolpathConfig {
@@ -88,6 +92,7 @@ impl Default for ToolpathConfig {
             feed_mm_min: 0.0,
             job: "brdfmill tile".into(),
             arcs: true,
+            max_hours: 12.0,
         }
     }
 }
@@ -129,7 +134,7 @@ pub enum ToolpathError {
 /// What the program does, in numbers.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Summary {
-    /// Lines of G-code.
+    /// Lines of G-code, over all the program files.
     pub lines: usize,
     /// Motion blocks.
     pub blocks: usize,
@@ -181,16 +186,41 @@ pub struct Summary {
     /// Finishing blocks written as `G2`/`G3` arcs in the pass plane.
     #[serde(default)]
     pub arc_blocks: usize,
+    /// Of the estimate without the block-rate limit, the time in rapids, s.
+    #[serde(default)]
+    pub rapid_s: f64,
+    /// Feed path that removes nothing (air), mm, as the simulation of the program measured it (`None` until
+    /// a job simulates it: `brdfmill toolpath` alone does not).
+    #[serde(default)]
+    pub air_feed_mm: Option<f64>,
+    /// The time of that path at its programmed feeds, s.
+    #[serde(default)]
+    pub air_feed_s: Option<f64>,
+    /// The program files, in the order they run (one unless GRBL changes tools: one per tool).
+    #[serde(default)]
+    pub files: Vec<files::FileSummary>,
 }
 
 /// A finished program.
 pub struct Toolpath {
     /// The moves.
     pub moves: Vec<Move>,
-    /// The G-code text.
+    /// The whole job as one text, for reading back: the only program, or for GRBL with several tools the
+    /// programs of [`Toolpath::files`] as one with each later tool's mount a manual change (`T<n> M0`,
+    /// which the simulation reads as the operator changing the tool). Written as a file only when it is
+    /// the one program.
     pub gcode: String,
+    /// The program files to write and run, in order ([`files`]).
+    pub files: Vec<files::ProgramFile>,
     /// Its numbers.
     pub summary: Summary,
+}
+
+impl Toolpath {
+    /// The texts of the program files, in order.
+    pub fn texts(&self) -> Vec<&str> {
+        self.files.iter().map(|f| f.gcode.as_str()).collect()
+    }
 }
 
 /// The finishing tool's CL rows (in parallel), raw (one point per grid column inside the area).
@@ -313,23 +343,32 @@ fn check_points(pass: &Pass, q: f64) -> Vec<P3> {
 }
 
 /// The final finishing raster at the CL surface.
+/// `stock_cl[k]`: the cutter location over the stock the raster finds along raw pass `k`, whose first point
+/// is the pass's start unless the pass runs reversed.
+#[allow(clippy::too_many_arguments)]
 fn finishing(
     b: &mut Builder,
     design: &raster::RotatedDesign,
     dc: &dropcutter::DropCutter,
     passes: &[Pass],
+    stock_cl: &[Vec<f64>],
     strategy: Strategy,
     feed: f64,
     tol: f64,
 ) {
     b.moves.push(Move::Comment("finishing"));
     let mut first = true;
-    for pass in passes {
+    for (k, pass) in passes.iter().enumerate() {
         if pass.pts.is_empty() {
             continue;
         }
+        let reversed = matches!(strategy, Strategy::Oneway) || k % 2 == 1;
+        let start_cl = stock_cl
+            .get(k)
+            .and_then(|s| if reversed { s.last() } else { s.first() })
+            .copied();
         if first || strategy == Strategy::Oneway {
-            b.approach(&pass.pts);
+            b.approach(&pass.pts, start_cl);
             first = false;
         } else {
             let link = link_points(design, dc, b.at, pass.pts[0], |z| z);
@@ -342,9 +381,7 @@ fn finishing(
             }
         }
         if strategy == Strategy::Oneway {
-            let up = [b.at[0], b.at[1], LEAD_MM.max(b.at[2])];
-            let f = b.machine.limits.max_feed_z_mm_min;
-            b.feed(up, f);
+            b.retract();
         }
     }
 }
@@ -415,20 +452,25 @@ fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, Toolpath
         layers,
         levels,
         tool_changes,
+        stock_cl,
     } = stock_built?;
     let arc_blocks = passes
         .iter()
         .flat_map(|p| &p.pieces)
         .filter(|pc| matches!(pc, arcs::Piece::Arc(_)))
         .count();
-    finishing(&mut b, &design, &dc, &passes, strategy, feed, tol);
+    finishing(&mut b, &design, &dc, &passes, &stock_cl, strategy, feed, tol);
     b.stop_tool();
     let (ramped_entries, plunged_entries) = (b.ramped_entries, b.plunged_entries);
     let moves = b.moves;
 
-    check::check(&moves, start, machine, rough).map_err(|e| ToolpathError::Machine(e.0))?;
-    check::check(&moves, start, machine, tool).map_err(|e| ToolpathError::Machine(e.0))?;
+    // the work: the area and the tools' reach beyond it (every pass and link stays within it)
+    let reach = r.max(rough.radius_mm()) + 3.0 * tile.pitch_mm;
+    let work = Some([-reach, -reach, ax + reach, ay + reach]);
+    check::check_in(&moves, start, machine, rough, work).map_err(|e| ToolpathError::Machine(e.0))?;
+    check::check_in(&moves, start, machine, tool, work).map_err(|e| ToolpathError::Machine(e.0))?;
     let est = estimate::estimate(&moves, start, machine, machine.block_rate_limit());
+    over_budget(cfg, &moves, start, machine, &est, passes.len(), stepover)?;
     let len = moves::lengths(&moves, start);
     let (lo, hi) = moves::bounds(&moves, start);
     let scallop = raster::scallop_for_stepover(r, stepover) * 1000.0;
@@ -445,18 +487,20 @@ fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, Toolpath
         levels,
         depth,
         area: (ax, ay),
-        est: &est,
     };
     let header = header(&facts);
+    let joined_header: Vec<String> = header.iter().cloned().chain([estimate_line(&est)]).collect();
     let setup = emit::Setup {
         dialect: machine.dialect,
-        header: &header,
+        header: &joined_header,
         path_tolerance_mm: machine.limits.path_tolerance_mm,
         resolution_mm: q,
+        tool_change_machine_z_mm: machine.program.tool_change_machine_z_mm,
     };
     let gcode = emit::emit(&setup, &moves);
+    let program_files = files::program_files(&setup, &header, &moves, start, machine);
     let summary = Summary {
-        lines: gcode.lines().count(),
+        lines: program_files.iter().map(|f| f.summary.lines).sum(),
         blocks: est.blocks,
         peak_blocks_s: est.peak_blocks_s,
         max_blocks_s: machine.block_rate_limit(),
@@ -480,8 +524,53 @@ fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, Toolpath
         ramped_entries,
         plunged_entries,
         arc_blocks,
+        rapid_s: est.rapid_s,
+        air_feed_mm: None,
+        air_feed_s: None,
+        files: program_files.iter().map(|f| f.summary.clone()).collect(),
     };
-    Ok(Toolpath { moves, gcode, summary })
+    Ok(Toolpath {
+        moves,
+        gcode,
+        files: program_files,
+        summary,
+    })
+}
+
+/// Refuse a program whose estimate is over `toolpath.max_hours`, with the time of the final raster and of
+/// what comes before it (roughing and intermediate levels), and what would shorten each.
+fn over_budget(
+    cfg: &ToolpathConfig,
+    moves: &[Move],
+    start: P3,
+    machine: &Machine,
+    est: &estimate::Estimate,
+    passes: usize,
+    stepover: f64,
+) -> Result<(), ToolpathError> {
+    if est.block_limited_s <= cfg.max_hours * 3600.0 {
+        return Ok(());
+    }
+    let k = moves
+        .iter()
+        .position(|m| matches!(m, Move::Comment("finishing")))
+        .unwrap_or(0);
+    let finish = estimate::estimate(&moves[k..], start, machine, machine.block_rate_limit()).block_limited_s;
+    let before = (est.block_limited_s - finish).max(0.0);
+    Err(ToolpathError::Limit {
+        field: "max_hours".into(),
+        estimate: format!(
+            "the program would run {} on this machine, more than toolpath.max_hours = {} h: the final raster's \
+             {passes} passes at a {:.1} µm stepover take {} (a larger toolpath.scallop_um widens the stepover as \
+             its square root; a smaller toolpath.area_mm shortens every pass), roughing and intermediate levels {} \
+             (a roughing tool, toolpath.rough_tool, takes deeper layers); or raise toolpath.max_hours",
+            hms(est.block_limited_s),
+            cfg.max_hours,
+            1000.0 * stepover,
+            hms(finish),
+            hms(before)
+        ),
+    })
 }
 
 /// What the header states.
@@ -498,7 +587,6 @@ struct HeaderFacts<'a> {
     levels: usize,
     depth: f64,
     area: (f64, f64),
-    est: &'a estimate::Estimate,
 }
 
 /// The header comment lines (made safe by the emitter).
@@ -509,18 +597,24 @@ fn header(f: &HeaderFacts) -> Vec<String> {
     let chip_um = 1000.0 * f.feed / (cut.spindle_rpm * tool.flutes as f64);
     let mut h = vec![
         format!("brdfmill {} - {}", env!("CARGO_PKG_VERSION"), cfg.job),
-        format!("machine: {} ({:?})", f.machine.name, f.machine.dialect),
+        format!("machine: {}, {} G-code", f.machine.name, f.machine.dialect.name()),
         format!(
-            "finish T{} {}: {} D{} mm, stock {:?}",
+            "finish T{} {}: {} D{} mm, stock {}",
             tool.number,
             tool.id,
             tool.shape.kind(),
             tool.diameter_mm(),
-            cfg.stock
+            cfg.stock.name()
         ),
         format!(
-            "finish: stepover {:.4} mm, scallop {:.3} um, angle {} deg, {:?}",
-            f.stepover, f.scallop, cfg.angle_deg, f.strategy
+            "finish: stepover {:.1} um, scallop {:.3} um, angle {} deg, {}",
+            1000.0 * f.stepover,
+            f.scallop,
+            cfg.angle_deg,
+            match f.strategy {
+                Strategy::Zigzag => "zigzag",
+                _ => "one-way",
+            }
         ),
         format!(
             "finish: F{} plunge {} S{} chip {chip_um:.2} um/tooth, doc {} mm",
@@ -550,13 +644,17 @@ fn header(f: &HeaderFacts) -> Vec<String> {
         "design depth {:.4} mm, simplification tolerance {} um (one-sided)",
         f.depth, cfg.tolerance_um
     ));
-    h.push(format!(
-        "estimated run time {} ({} at the block rate), {} blocks",
-        hms(f.est.s),
-        hms(f.est.block_limited_s),
-        f.est.blocks
-    ));
     h
+}
+
+/// The header's estimate line.
+pub(crate) fn estimate_line(est: &estimate::Estimate) -> String {
+    format!(
+        "estimated run time {} ({} at the block rate), {} blocks",
+        hms(est.s),
+        hms(est.block_limited_s),
+        est.blocks
+    )
 }
 
 /// Points along the straight link from `a` to `b` every pitch, at the CL surface mapped by `zmap`, ending at

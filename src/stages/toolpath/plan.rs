@@ -90,6 +90,12 @@ impl ToolpathConfig {
         if !(ax > 0.0 && ay > 0.0 && ax.is_finite() && ay.is_finite()) {
             return bad(format!("`area_mm` must be positive, got [{ax}, {ay}]"));
         }
+        if !(self.max_hours > 0.0 && self.max_hours.is_finite()) {
+            return bad(format!(
+                "`max_hours` must be a positive number of hours, got {}",
+                self.max_hours
+            ));
+        }
         if ax > machine.travel.x_mm || ay > machine.travel.y_mm {
             return Err(ToolpathError::Machine(format!(
                 "impossible combination: `area_mm` = [{ax}, {ay}] is larger than the machine's travel {}×{} mm \

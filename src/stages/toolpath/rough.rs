@@ -133,7 +133,7 @@ pub fn emit_level(b: &mut Builder, lv: &Level, link: &dyn Fn(P3, P3) -> Vec<P3>)
                 n == 0 && d <= 1.5 * lv.stepover_mm + 2.0 * lv.pitch_mm
             });
             if first || !near {
-                b.approach(&run);
+                b.approach(&run, None);
                 first = false;
             } else {
                 let l = link(b.at, run[0]);

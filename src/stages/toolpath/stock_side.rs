@@ -38,6 +38,9 @@ pub(super) struct StockBuilt<'a> {
     pub(super) layers: usize,
     pub(super) levels: usize,
     pub(super) tool_changes: usize,
+    /// The finishing tool's cutter location over the stock as the final raster finds it, per raw pass row
+    /// (the lowest its tip can sit there without touching the stock), mm.
+    pub(super) stock_cl: Vec<Vec<f64>>,
 }
 
 /// Roughing whenever the finishing tool could not take the depth in one cut (the allowance is half the
@@ -84,12 +87,13 @@ pub(super) fn stock_side<'a>(s: &StockSide<'a>) -> Result<StockBuilt<'a>, Toolpa
     if layers > 0 {
         lower_stock(design, &mut stock, &b.moves, s.start, rshape, |_, _| {});
     }
-    let levels = intermediate_levels(&mut b, s, &mut stock)?;
+    let (levels, stock_cl) = intermediate_levels(&mut b, s, &mut stock)?;
     Ok(StockBuilt {
         builder: b,
         layers,
         levels,
         tool_changes,
+        stock_cl,
     })
 }
 
@@ -118,6 +122,7 @@ fn lower_stock(
                     kind: SegmentKind::Feed,
                     line: 0,
                     tool: 0,
+                    feed_mm_min: 0.0,
                 });
             }
             at = p;
@@ -194,8 +199,12 @@ fn stock_cl_rows(
 /// gaps up to [`rough::GAP_DIAMETERS`] tool diameters are ridden at `max(CL, S − doc)`), and the stock is then re-swept with that
 /// level's moves ([`lower_stock`]), so each level is measured against the stock the one before it left, not
 /// against an estimate. Points within the depth of cut are left to the final raster, which then engages at
-/// most `doc` everywhere. Returns the number of levels.
-fn intermediate_levels(b: &mut Builder, s: &StockSide, stock: &mut Heightfield) -> Result<usize, ToolpathError> {
+/// most `doc` everywhere. Returns the number of levels and `S` along each pass after them.
+fn intermediate_levels(
+    b: &mut Builder,
+    s: &StockSide,
+    stock: &mut Heightfield,
+) -> Result<(usize, Vec<Vec<f64>>), ToolpathError> {
     let (design, dc, vs, finals) = (s.design, s.dc, s.vs, s.raw);
     let (doc, stepover, feed, tol) = (s.cut.max_depth_of_cut_mm, s.stepover, s.feed, s.tol);
     let gap_points = (rough::GAP_DIAMETERS * dc.cutter().diameter_mm() / design.hf.pitch_mm).ceil() as usize;
@@ -217,7 +226,7 @@ fn intermediate_levels(b: &mut Builder, s: &StockSide, stock: &mut Heightfield) 
             .flat_map(|(f, s)| f.iter().zip(s).map(|(f, s)| over(f, *s)))
             .fold(0.0, f64::max);
         if worst <= doc + 1e-6 {
-            return Ok(levels);
+            return Ok((levels, s_rows));
         }
         if levels >= most.min(rough::MAX_LAYERS) {
             return Err(limit(

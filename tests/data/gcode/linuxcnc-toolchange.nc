@@ -3,6 +3,7 @@ G0 Z25
 M5
 M9
 (tool T1: ball D1 mm)
+G53 G0 Z0
 T1 M6
 G43 H1
 G0 Z25
