@@ -66,6 +66,17 @@ fn run_default_job(out: &Path) -> std::process::Output {
     o
 }
 
+/// `brdfmill run examples/default.toml --set S … --out OUT`, whatever its exit.
+fn run_default_job_with(sets: &[&str], out: &Path) -> std::process::Output {
+    let job = root().join("examples/default.toml");
+    let mut args = vec!["run", job.to_str().unwrap()];
+    for s in sets {
+        args.extend(["--set", s]);
+    }
+    args.extend(["--out", out.to_str().unwrap()]);
+    brdfmill(&args)
+}
+
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
 }
@@ -415,15 +426,7 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
 #[test]
 fn zigzag_on_a_machine_with_backlash_is_warned_of_and_its_cost_measured() {
     let out = tempfile::tempdir().unwrap();
-    let job = root().join("examples/default.toml");
-    let o = brdfmill(&[
-        "run",
-        job.to_str().unwrap(),
-        "--set",
-        "toolpath.strategy=zigzag",
-        "--out",
-        out.path().to_str().unwrap(),
-    ]);
+    let o = run_default_job_with(&["toolpath.strategy=zigzag"], out.path());
     assert!(matches!(o.status.code(), Some(0 | 3)), "{o:?}");
     let stdout = String::from_utf8_lossy(&o.stdout);
     assert!(
@@ -667,17 +670,13 @@ fn a_target_wider_than_the_ndf_grid_is_reported_with_its_escaped_mass() {
 #[test]
 fn a_linuxcnc_jobs_setup_sheet_names_no_grbl_command() {
     let out = tempfile::tempdir().unwrap();
-    let job = root().join("examples/default.toml");
-    let o = brdfmill(&[
-        "run",
-        job.to_str().unwrap(),
-        "--set",
-        "machine.profile=../machines/linuxcnc-mill.toml",
-        "--set",
-        "toolpath.area_mm=[4.0, 4.0]",
-        "--out",
-        out.path().to_str().unwrap(),
-    ]);
+    let o = run_default_job_with(
+        &[
+            "machine.profile=../machines/linuxcnc-mill.toml",
+            "toolpath.area_mm=[4.0, 4.0]",
+        ],
+        out.path(),
+    );
     assert!(matches!(o.status.code(), Some(0 | 3)), "{o:?}");
     let html = std::fs::read_to_string(out.path().join("report.html")).unwrap();
     let start = html.find("<h2>To mill this</h2>").expect("the setup sheet");

@@ -125,7 +125,7 @@ pub fn run(a: &Args) -> Result<()> {
         }
     }
     if machine.dialect == brdfmill::gcode::Dialect::Linuxcnc {
-        let table = a.out.with_file_name("tool.tbl");
+        let table = a.out.with_file_name(brdfmill::gcode::TOOL_TABLE_FILE);
         brdfmill::base::io::write_atomic(&table, brdfmill::gcode::tool_table(&machine).as_bytes())?;
         println!(
             "tools     {} (LinuxCNC tool table: rs274 -t, or the machine's [EMCIO] TOOL_TABLE)",

@@ -258,6 +258,16 @@ impl Stock {
 }
 
 impl Tool {
+    /// Chip load at `feed_mm_min` and `spindle_rpm`, µm per tooth: `1000·F / (n·z)`.
+    pub fn chip_load_um(&self, feed_mm_min: f64, spindle_rpm: f64) -> f64 {
+        1000.0 * feed_mm_min / (spindle_rpm * self.flutes.max(1) as f64)
+    }
+
+    /// Surface speed at the full diameter at `spindle_rpm`, m/min: `π·D·n / 1000`.
+    pub fn surface_speed_m_min(&self, spindle_rpm: f64) -> f64 {
+        std::f64::consts::PI * self.diameter_mm() * spindle_rpm / 1000.0
+    }
+
     /// Cutting data for a stock.
     pub fn cutting(&self, stock: Stock) -> &CuttingData {
         match stock {

@@ -246,6 +246,9 @@ fn tool_change(out: &mut String, m: &mut Modal, setup: &Setup, number: u32, diam
     m.feed = None;
 }
 
+/// The file name the tool table is written under, beside its program.
+pub const TOOL_TABLE_FILE: &str = "tool.tbl";
+
 /// LinuxCNC's tool table for every tool of `machine` (`T<n> P<pocket> D<diameter> Z<length> ;comment`): the
 /// lengths are 0, to be measured on the machine (`G43 H<n>` then applies what the operator set); the
 /// comment names the profile's id, made safe for a comment. `rs274 -t` reads it.

@@ -21,7 +21,7 @@ pub(crate) mod modal;
 pub mod moves;
 pub mod program;
 
-pub use emit::tool_table;
+pub use emit::{tool_table, TOOL_TABLE_FILE};
 
 use serde::{Deserialize, Serialize};
 

@@ -144,7 +144,7 @@ fn describe(p: &Path) -> String {
         "tile.png" => "tile shaded relief",
         "tile.stl" => "faceted solid of one tile (binary STL, mm)",
         "program.nc" => "G-code",
-        "tool.tbl" => "LinuxCNC tool table for the program (lengths 0: set on the machine)",
+        crate::gcode::TOOL_TABLE_FILE => "LinuxCNC tool table for the program (lengths 0: set on the machine)",
         "program.json" => "G-code summary",
         "sim.npy" => "simulated milled heightfield, mm (NumPy)",
         "sim.png" => "simulated surface shaded relief",

@@ -23,6 +23,8 @@ pub const PAD_MM: f64 = 10.0;
 pub const CLAMP_MM: f64 = 10.0;
 /// Stick-out beyond the cut's depth, mm: the collet and the shank clear the stock top by this much.
 pub const STICKOUT_CLEARANCE_MM: f64 = 2.0;
+/// Stock left under the deepest cut, mm.
+pub const FLOOR_MM: f64 = 2.0;
 
 /// Surface speed of carbide in aluminium below which the sheet warns, m/min (the low end of carbide
 /// makers' data for aluminium alloys, 300 SFM ≈ 90 m/min).
@@ -48,9 +50,8 @@ pub fn stock_rect(lo: [f64; 3], hi: [f64; 3], r: f64) -> ([f64; 4], [f64; 2]) {
 /// speed too low for carbide in aluminium, no coolant or air in aluminium; each with what would work.
 pub fn cutting_advice(tool: &Tool, stock: Stock, runout_um: f64, coolant_off: bool, max_rpm: f64) -> Vec<String> {
     let c = tool.cutting(stock);
-    let d = tool.diameter_mm();
-    let chip_um = 1000.0 * c.feed_mm_min / (c.spindle_rpm * tool.flutes.max(1) as f64);
-    let v = std::f64::consts::PI * d * c.spindle_rpm / 1000.0;
+    let chip_um = tool.chip_load_um(c.feed_mm_min, c.spindle_rpm);
+    let v = tool.surface_speed_m_min(c.spindle_rpm);
     let mut out = vec![];
     if tool.flutes > 1 && chip_um < runout_um {
         out.push(format!(
@@ -59,7 +60,7 @@ pub fn cutting_advice(tool: &Tool, stock: Stock, runout_um: f64, coolant_off: bo
         ));
     }
     if stock == Stock::Aluminium && v < ALUMINIUM_MIN_SURFACE_M_MIN {
-        let rpm = ALUMINIUM_MIN_SURFACE_M_MIN * 1000.0 / (std::f64::consts::PI * d);
+        let rpm = c.spindle_rpm * ALUMINIUM_MIN_SURFACE_M_MIN / v;
         out.push(format!(
             "{v:.1} m/min of surface speed at the ball's full diameter (less where near-flat facets cut near its \
              tip, where it is zero) is far below carbide's {ALUMINIUM_MIN_SURFACE_M_MIN:.0} m/min in aluminium: it \
@@ -84,8 +85,8 @@ pub fn cutting_advice(tool: &Tool, stock: Stock, runout_um: f64, coolant_off: bo
 fn tool_line(ready: &Ready, tool: &Tool, depth_mm: f64) -> String {
     let t = &ready.job.toolpath;
     let c = tool.cutting(t.stock);
-    let chip_um = 1000.0 * c.feed_mm_min / (c.spindle_rpm * tool.flutes.max(1) as f64);
-    let v = std::f64::consts::PI * tool.diameter_mm() * c.spindle_rpm / 1000.0;
+    let chip_um = tool.chip_load_um(c.feed_mm_min, c.spindle_rpm);
+    let v = tool.surface_speed_m_min(c.spindle_rpm);
     let m = &ready.machine;
     let advice = cutting_advice(
         tool,
@@ -120,12 +121,13 @@ fn tool_line(ready: &Ready, tool: &Tool, depth_mm: f64) -> String {
 /// The sheet's rows (the report's "To mill this" table).
 pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation) -> Vec<(String, String)> {
     let t = &ready.job.toolpath;
-    let plan = &ready.toolpath;
-    let tools: Vec<&Tool> = if s.roughing_layers > 0 && plan.rough.id != plan.tool.id {
-        vec![&plan.rough, &plan.tool]
-    } else {
-        vec![&plan.tool]
-    };
+    // the tools in the order the programs use them
+    let tools: Vec<&Tool> = s
+        .files
+        .iter()
+        .flat_map(|f| &f.tools)
+        .filter_map(|id| ready.machine.tool(id).ok())
+        .collect();
     let r = tools.iter().map(|t| t.radius_mm()).fold(0.0, f64::max);
     let [lo, hi] = s.extents_mm;
     let ([x0, y0, x1, y1], pad) = stock_rect(lo, hi, r);
@@ -167,7 +169,7 @@ pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation)
                 t.stock.name(),
                 x1 - x0,
                 y1 - y0,
-                depth + 2.0,
+                depth + FLOOR_MM,
                 lo[0] - r,
                 hi[0] + r,
                 lo[1] - r,

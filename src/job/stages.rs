@@ -121,9 +121,6 @@ pub(super) fn program_and_cut(
     }))
 }
 
-/// LinuxCNC's tool table beside the program (`rs274 -t tool.tbl`, or the machine's `[EMCIO] TOOL_TABLE`).
-pub(super) const TOOL_TABLE_FILE: &str = "tool.tbl";
-
 /// The design heightfield → `program.nc` (GRBL with several tools: `program-1.nc`, `program-2.nc`, … one per
 /// tool), `tool.tbl` for LinuxCNC, `program.json`.
 fn toolpath_stage(ready: &Ready, design: &Heightfield, o: &mut Out) -> Result<toolpath::Toolpath, JobError> {
@@ -133,8 +130,8 @@ fn toolpath_stage(ready: &Ready, design: &Heightfield, o: &mut Out) -> Result<to
     }
     if ready.machine.dialect == crate::gcode::Dialect::Linuxcnc {
         o.write(
-            TOOL_TABLE_FILE,
-            crate::gcode::emit::tool_table(&ready.machine).as_bytes(),
+            crate::gcode::TOOL_TABLE_FILE,
+            crate::gcode::tool_table(&ready.machine).as_bytes(),
         )?;
     }
     write_summary(&program.summary, o)?;

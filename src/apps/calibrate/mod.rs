@@ -209,7 +209,7 @@ pub const SHEET_FILE: &str = "calibrate.md";
 /// The dimensions' file name.
 pub const SPEC_FILE: &str = "calibrate.json";
 /// LinuxCNC's tool table's file name.
-pub const TOOL_TABLE_FILE: &str = "tool.tbl";
+pub use crate::gcode::TOOL_TABLE_FILE;
 
 impl Coupon {
     /// Write the program, the sheet, the dimensions and (LinuxCNC) the tool table into `dir`, each atomically;

@@ -141,20 +141,18 @@ impl<'m> Builder<'m> {
         }
         // never below the run's start (a layer's ceiling can be lower than a run that starts on the allowance)
         let top = top.max(p[2]);
+        self.air_down(top);
         // within the margin there is nothing to ramp through
         if top <= p[2] + ENTRY_MARGIN_MM + 1e-9 {
-            self.air_down(top);
             self.feed(p, plunge);
             return;
         }
         let legs = ramp_legs(run, top - p[2], self.ramp_tan);
         let Some(points) = legs else {
             self.plunged_entries += 1;
-            self.air_down(top);
             self.feed(p, plunge);
             return;
         };
-        self.air_down(top);
         let f = self.feed_mm_min;
         for q in points {
             self.feed(q, f);

@@ -71,13 +71,15 @@ fn parts(moves: &[Move], dialect: Dialect) -> Vec<&[Move]> {
 }
 
 /// The program files of `moves` (see the module documentation): each with the job's `header`, its own
-/// estimate from `start`, and a line that says which of the programs it is and how its tool is zeroed.
+/// estimate from `start` (`whole`, the job's, when it is the only file), and a line that says which of the
+/// programs it is and how its tool is zeroed.
 pub fn program_files(
     setup: &emit::Setup,
     header: &[String],
     moves: &[Move],
     start: P3,
     machine: &Machine,
+    whole: &estimate::Estimate,
 ) -> Vec<ProgramFile> {
     let parts = parts(moves, setup.dialect);
     let n = parts.len();
@@ -98,7 +100,11 @@ pub fn program_files(
                     _ => None,
                 })
                 .collect();
-            let est = estimate::estimate(part, start, machine, machine.block_rate_limit());
+            let est = if n == 1 {
+                *whole
+            } else {
+                estimate::estimate(part, start, machine, machine.block_rate_limit())
+            };
             let mut h = header.to_vec();
             h.push(super::estimate_line(&est));
             if n > 1 {

@@ -464,9 +464,8 @@ fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, Toolpath
     let (ramped_entries, plunged_entries) = (b.ramped_entries, b.plunged_entries);
     let moves = b.moves;
 
-    // the work: the area and the tools' reach beyond it (every pass and link stays within it)
-    let reach = r.max(rough.radius_mm()) + 3.0 * tile.pitch_mm;
-    let work = Some([-reach, -reach, ax + reach, ay + reach]);
+    // the work: the area and the tools' reach beyond it (every pass and link stays within the design's margin)
+    let work = Some([-margin, -margin, ax + margin, ay + margin]);
     check::check_in(&moves, start, machine, rough, work).map_err(|e| ToolpathError::Machine(e.0))?;
     check::check_in(&moves, start, machine, tool, work).map_err(|e| ToolpathError::Machine(e.0))?;
     let est = estimate::estimate(&moves, start, machine, machine.block_rate_limit());
@@ -497,8 +496,12 @@ fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, Toolpath
         resolution_mm: q,
         tool_change_machine_z_mm: machine.program.tool_change_machine_z_mm,
     };
-    let gcode = emit::emit(&setup, &moves);
-    let program_files = files::program_files(&setup, &header, &moves, start, machine);
+    let program_files = files::program_files(&setup, &header, &moves, start, machine, &est);
+    // one file is the job; several are read back joined
+    let gcode = match &program_files[..] {
+        [one] => one.gcode.clone(),
+        _ => emit::emit(&setup, &moves),
+    };
     let summary = Summary {
         lines: program_files.iter().map(|f| f.summary.lines).sum(),
         blocks: est.blocks,
@@ -594,7 +597,7 @@ fn header(f: &HeaderFacts) -> Vec<String> {
     let (cfg, tool, rough) = (f.cfg, f.tool, f.rough);
     let cut = tool.cutting(cfg.stock);
     let rc = rough.cutting(cfg.stock);
-    let chip_um = 1000.0 * f.feed / (cut.spindle_rpm * tool.flutes as f64);
+    let chip_um = tool.chip_load_um(f.feed, cut.spindle_rpm);
     let mut h = vec![
         format!("brdfmill {} - {}", env!("CARGO_PKG_VERSION"), cfg.job),
         format!("machine: {}, {} G-code", f.machine.name, f.machine.dialect.name()),
