@@ -133,7 +133,8 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         "tile.npy",
         "tile.png",
         "tile.stl",
-        "program.nc",
+        "program-1.nc",
+        "program-2.nc",
         "program.json",
         "sim.npy",
         "sim.png",
@@ -172,16 +173,75 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
     );
     // The program, its summary and the simulation's reading of it agree on its length; the finishing
     // stepover is the one a 0.5 mm ball needs for 1 µm scallops: s = 2·√(2rh − h²) (a circle's chord).
-    let nc = std::fs::read_to_string(p("program.nc")).unwrap();
+    // Issue 35: the relief is deeper than the 0.5 mm ball's depth of cut, so the job roughs with the
+    // profile's roughing tool (the 3018's 2 mm ball), and on GRBL that is a program of its own.
     let pj = json(&p("program.json"));
+    let files: Vec<(&str, Vec<&str>)> = pj["files"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|f| {
+            let tools = f["tools"].as_array().unwrap().iter().map(|t| t.as_str().unwrap());
+            (f["file"].as_str().unwrap(), tools.collect())
+        })
+        .collect();
+    assert_eq!(
+        files,
+        [("program-1.nc", vec!["ball2"]), ("program-2.nc", vec!["ball05"])],
+        "roughing with the profile's roughing tool, one program per tool"
+    );
+    let texts: Vec<String> = files
+        .iter()
+        .map(|(f, _)| std::fs::read_to_string(p(f)).unwrap())
+        .collect();
     let sj = json(&p("sim.json"));
     assert_eq!(
-        nc.lines().count() as u64,
+        texts.iter().map(|t| t.lines().count() as u64).sum::<u64>(),
         pj["lines"].as_u64().unwrap(),
         "program.json lines"
     );
     assert_eq!(sj["stats"]["lines"], pj["lines"], "sim.json read another program");
-    assert_eq!(nc.lines().last().map(str::trim), Some("M30"));
+    for t in &texts {
+        assert_eq!(t.lines().last().map(str::trim), Some("M30"));
+    }
+    // No rapid removes material on the declared machine (backlash and runout included).
+    assert_eq!(sj["stats"]["rapid_cuts"], 0, "{}", sj["stats"]["rapid_cut_lines"]);
+    // The cutting data, from the tool × stock table for the 3018 (10,000 rpm, 15 µm TIR, coolant off): the
+    // 0.5 mm ball's surface speed π·D·n/1000 is named with the speed that reaches carbide's 90 m/min in
+    // aluminium, 1000·90/(π·0.5) rpm, and the bit size that reaches it at 10,000 rpm, 1000·90/(π·10,000) mm;
+    // its chip load stops at the bit's top (12 µm per mm of D), below the runout, which is named.
+    let cutting = pj["cutting"].as_array().unwrap();
+    let ids: Vec<&str> = cutting.iter().map(|c| c["id"].as_str().unwrap()).collect();
+    assert_eq!(ids, ["ball2", "ball05"]);
+    let fin = &cutting[1];
+    assert_eq!(fin["from_table"], true);
+    assert_eq!(f(&fin["spindle_rpm"]), 10_000.0);
+    let pi = std::f64::consts::PI;
+    assert!((f(&fin["surface_m_min"]) - pi * 0.5 * 10.0).abs() < 1e-9);
+    assert!((f(&fin["chip_um"]) - 1000.0 * f(&fin["feed_mm_min"]) / (10_000.0 * 2.0)).abs() < 1e-9);
+    assert!(f(&fin["chip_um"]) <= 6.0 + 1e-9, "{fin}");
+    let finding = |kind: &str| {
+        fin["findings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .find(|x| x["kind"] == kind)
+            .unwrap_or_else(|| panic!("no {kind} in {fin}"))
+            .clone()
+    };
+    let speed = finding("surface_speed_low");
+    assert!(
+        (f(&speed["rpm_needed"]) - 90_000.0 / (pi * 0.5)).abs() < 1e-6,
+        "{speed}"
+    );
+    assert!((f(&speed["diameter_needed_mm"]) - 9.0 / pi).abs() < 1e-9, "{speed}");
+    assert_eq!(f(&finding("chip_below_runout")["runout_um"]), 15.0);
+    finding("no_coolant");
+    assert!(stdout.contains("cutting   ball05: 120 mm/min, 10000 rpm"), "{stdout}");
+    assert!(
+        stdout.contains("it takes 57296 rpm"),
+        "the summary names the speed it would take"
+    );
     let (r, h): (f64, f64) = (0.25, 1e-3);
     let stepover = f(&pj["stepover_mm"]);
     assert!(
@@ -346,7 +406,8 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         "metrics.json accuracy"
     );
     assert!(
-        nc.lines()
+        texts[1]
+            .lines()
             .take(30)
             .any(|l| l.starts_with("(finish:") && l.contains("one-way")),
         "a machine with backlash finishes one-way"
@@ -378,7 +439,6 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
     println!("air feeds {air:.0} s, rapids {rapid:.0} s of {est:.0} s");
     assert!(air > 0.0 && air < 0.05 * est, "air {air} s of {est} s");
     assert!(rapid > 0.0 && rapid < est, "rapids {rapid} s of {est} s");
-    assert_eq!(pj["files"][0]["file"], "program.nc", "one tool, one program");
     // the estimate (unlimited look-ahead) against a planner that looks 15 blocks ahead, as GRBL does, on the
     // program as written: within 5%
     let m = brdfmill::cut::machine::Machine::load(&root().join("machines/grbl-3018.toml")).unwrap();
@@ -388,13 +448,15 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         arc_tolerance_mm: 2e-3,
         ..Default::default()
     };
-    let motion = brdfmill::stages::simulate::gcode::parse(&nc, &opt).unwrap();
+    let texts: Vec<&str> = texts.iter().map(String::as_str).collect();
+    let motion = brdfmill::stages::simulate::gcode::parse_all(&texts, &opt).unwrap();
     let buffered = planner::planner_with_buffer(&motion.moves, opt.start_mm, &m);
     let ours = f(&pj["estimated_unlimited_s"]);
     println!("estimate {ours:.0} s, 15-block planner {buffered:.0} s");
     assert!((buffered - ours).abs() <= 0.05 * ours, "{ours} s against {buffered} s");
-    // The setup sheet comes before the evidence, and its stock holds the cut (area + the ball's 0.25 mm
-    // radius on each side), the pad and the clamps: at least 13.2 + 0.5 + 10 + 2·10 mm across.
+    // The setup sheet comes before the evidence, and its stock holds the cut (area + the largest tool's
+    // radius on each side: the 2 mm roughing ball's 1 mm), the pad and the clamps: at least 13.2 + 2 + 10 +
+    // 2·10 mm across.
     let sheet = html.find("<h2>To mill this</h2>").expect("the setup sheet");
     assert!(
         sheet < html.find("<figure>").unwrap(),
@@ -413,10 +475,14 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         .map(|v| v.trim().parse().unwrap())
         .collect();
     assert!(
-        size[0] >= 13.2 + 0.5 + 10.0 + 20.0 - 1e-9 && size[1] >= 13.2 + 0.5 + 20.0 - 1e-9,
+        size[0] >= 13.2 + 2.0 + 10.0 + 20.0 - 1e-9 && size[1] >= 13.2 + 2.0 + 20.0 - 1e-9,
         "{stock}"
     );
-    assert!(html[sheet..].contains("touch-off pad") && html[sheet..].contains("brdfmill stream program.nc"));
+    assert!(html[sheet..].contains("touch-off pad") && html[sheet..].contains("brdfmill stream program-1.nc"));
+    assert!(
+        html[sheet..].contains("57296 rpm"),
+        "the sheet names the speed the finishing ball would need"
+    );
 }
 
 /// The default job forced to finish zigzag on the 3018 (25 µm of backlash on X and Y): the run warns, the

@@ -236,9 +236,16 @@ fn logo_example_mills_each_region_to_its_own_target() {
         "light.png",
         "ndf-logo.json",
         "tile-field.npy",
-        "program.nc",
+        "program.json",
         "sim.npy",
     ] {
+        assert!(out.join(f).exists(), "{f} written");
+    }
+    // the programs program.json lists (one per tool on GRBL: the 3018 roughs with its 2 mm ball)
+    let pj: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("program.json")).unwrap()).unwrap();
+    for f in pj["files"].as_array().unwrap() {
+        let f = f["file"].as_str().unwrap();
         assert!(out.join(f).exists(), "{f} written");
     }
     let report = std::fs::read_to_string(out.join("report.html")).unwrap();

@@ -605,7 +605,14 @@ fn endless_settings_are_refused_with_the_field_and_estimate() {
     .unwrap();
     assert!(e.contains("stepover_mm"), "{e}");
     let text = std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("machines/grbl-3018.toml")).unwrap();
-    let tiny = Machine::parse(&text.replace("max_depth_of_cut_mm = 0.1 }", "max_depth_of_cut_mm = 1e-9 }")).unwrap();
+    // ball1 (the default finishing tool) with its own data, a depth of cut of 1e-9 mm
+    let tiny = text.replacen(
+        "flute_length_mm = 3.0\n",
+        "flute_length_mm = 3.0\naluminium = { feed_mm_min = 150.0, plunge_mm_min = 50.0, spindle_rpm = 10000.0, \
+         max_depth_of_cut_mm = 1e-9 }\n",
+        1,
+    );
+    let tiny = Machine::parse(&tiny).unwrap();
     let e = run(
         ToolpathConfig {
             area_mm: [4.0, 4.0],

@@ -148,7 +148,24 @@ fn summary(a: &Args, t: &brdfmill::stages::toolpath::ToolpathConfig, outcome: &j
                 .map(|s| format!(", {} feeding through air", hms(s)))
                 .unwrap_or_default(),
             p.depth_mm,
-            t.tools_in_order()
+            t.tools_in_order(&p.roughing_tool)
+        );
+    }
+    for c in outcome.program.iter().flat_map(|p| &p.cutting) {
+        let a = &c.assessment;
+        println!(
+            "cutting   {}: {} mm/min, {} rpm, {} mm deep ({}): {:.1} µm/tooth, {:.1} m/min{}",
+            c.id,
+            c.data.feed_mm_min,
+            c.data.spindle_rpm,
+            c.data.max_depth_of_cut_mm,
+            if c.from_table { "table" } else { "profile" },
+            a.chip_um,
+            a.surface_m_min,
+            a.findings
+                .iter()
+                .map(|f| format!("\n          check: {}", f.text()))
+                .collect::<String>()
         );
     }
     for (k, v) in &outcome.setup {

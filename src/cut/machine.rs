@@ -89,7 +89,7 @@ pub struct Spindle {
 }
 
 /// Program conventions.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct ProgramDefaults {
     /// Height above the stock top (z = 0) for rapid moves, mm.
@@ -112,6 +112,11 @@ pub struct ProgramDefaults {
     /// change no tool (one program per tool).
     #[serde(default)]
     pub tool_change_machine_z_mm: f64,
+    /// The tool a job roughs with when it names none (`toolpath.rough_tool`): used when it is larger than
+    /// the finishing tool and the relief is deeper than the finishing tool's depth of cut. Absent: the
+    /// finishing tool roughs.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roughing_tool: Option<String>,
 }
 
 fn coolant_off() -> Coolant {
@@ -126,7 +131,7 @@ impl ProgramDefaults {
 }
 
 /// Cutting data for one stock material.
-#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct CuttingData {
     /// Cutting feed, mm/min.
@@ -159,11 +164,13 @@ pub struct Tool {
     /// this angle at most (90: a straight plunge at the plunge feed is allowed). Default
     /// [`default_ramp_deg`] by kind.
     pub max_ramp_deg: f64,
-    /// Cutting data in aluminium (a profile may spell the key `aluminum`).
-    #[serde(alias = "aluminum")]
+    /// Cutting data in aluminium: the profile's (it may spell the key `aluminum`), or when it gives none the
+    /// table's for this tool on this machine ([`crate::cut::feeds::derive`]).
     pub aluminium: CuttingData,
-    /// Cutting data in machining wax and plastics.
+    /// Cutting data in machining wax and plastics, the profile's or the table's.
     pub wax: CuttingData,
+    /// Which stocks' data the profile gave (`[aluminium, wax]`); the others come from the table.
+    pub given: [bool; 2],
 }
 
 /// A tool as written in a profile.
@@ -182,9 +189,10 @@ struct ToolRecord {
     flutes: u32,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     max_ramp_deg: Option<f64>,
-    #[serde(alias = "aluminum")]
-    aluminium: CuttingData,
-    wax: CuttingData,
+    #[serde(default, alias = "aluminum", skip_serializing_if = "Option::is_none")]
+    aluminium: Option<CuttingData>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    wax: Option<CuttingData>,
 }
 
 fn two() -> u32 {
@@ -213,8 +221,10 @@ impl TryFrom<ToolRecord> for Tool {
             number: r.number,
             flutes: r.flutes,
             max_ramp_deg: r.max_ramp_deg.unwrap_or_else(|| default_ramp_deg(shape)),
-            aluminium: r.aluminium,
-            wax: r.wax,
+            // the table's data need the machine: filled in by `Machine::parse`
+            aluminium: r.aluminium.unwrap_or_default(),
+            wax: r.wax.unwrap_or_default(),
+            given: [r.aluminium.is_some(), r.wax.is_some()],
         })
     }
 }
@@ -230,8 +240,8 @@ impl From<Tool> for ToolRecord {
             number: t.number,
             flutes: t.flutes,
             max_ramp_deg: Some(t.max_ramp_deg),
-            aluminium: t.aluminium,
-            wax: t.wax,
+            aluminium: t.given[0].then_some(t.aluminium),
+            wax: t.given[1].then_some(t.wax),
         }
     }
 }
@@ -266,6 +276,34 @@ impl Tool {
     /// Surface speed at the full diameter at `spindle_rpm`, m/min: `π·D·n / 1000`.
     pub fn surface_speed_m_min(&self, spindle_rpm: f64) -> f64 {
         std::f64::consts::PI * self.diameter_mm() * spindle_rpm / 1000.0
+    }
+
+    /// The profile gave this stock's cutting data (else they come from the table, `cut::feeds`).
+    pub fn data_given(&self, stock: Stock) -> bool {
+        self.given[stock as usize]
+    }
+
+    /// A tool of this shape with the table's data on a 24,000 rpm spindle (for tests).
+    #[cfg(test)]
+    pub(crate) fn for_test(id: &str, shape: Shape) -> Tool {
+        let lim = crate::cut::feeds::Limits {
+            rpm: [0.0, 24_000.0],
+            max_feed_mm_min: 5000.0,
+            runout_um: 0.0,
+            coolant_on: true,
+        };
+        let d = shape.diameter_mm();
+        Tool {
+            id: id.into(),
+            shape,
+            flute_length_mm: 3.0 * d,
+            number: 1,
+            flutes: 2,
+            max_ramp_deg: default_ramp_deg(shape),
+            aluminium: crate::cut::feeds::derive(d, 2, Stock::Aluminium, &lim),
+            wax: crate::cut::feeds::derive(d, 2, Stock::Wax, &lim),
+            given: [false; 2],
+        }
     }
 
     /// Cutting data for a stock.
@@ -455,8 +493,9 @@ impl Machine {
             Some(found) => return Err(ProfileError::Version { found }),
             None => return Err(ProfileError::NoVersion),
         }
-        let m: Machine = toml::from_str(text).map_err(|e| ProfileError::Syntax(e.to_string()))?;
+        let mut m: Machine = toml::from_str(text).map_err(|e| ProfileError::Syntax(e.to_string()))?;
         m.validate()?;
+        m.fill_cutting_data();
         Ok(m)
     }
 
@@ -526,6 +565,16 @@ impl Machine {
         if self.tools.is_empty() {
             return Err(field("tools", "at least one `[[tools]]` entry", "none"));
         }
+        if let Some(id) = &self.program.roughing_tool {
+            if !self.tools.iter().any(|t| &t.id == id) {
+                let ids: Vec<&str> = self.tools.iter().map(|t| t.id.as_str()).collect();
+                return Err(field(
+                    "program.roughing_tool",
+                    &format!("one of the profile's tools ({})", ids.join(", ")),
+                    id,
+                ));
+            }
+        }
         for (k, t) in self.tools.iter().enumerate() {
             let f = |name: &str| format!("tools[{k}] (`{}`).{name}", t.id);
             if self.tools[..k].iter().any(|o| o.id == t.id) {
@@ -554,7 +603,8 @@ impl Machine {
                 return Err(field(f("flutes"), "in 1..=16", t.flutes));
             }
             pos(&f("flute_length_mm"), t.flute_length_mm)?;
-            for (name, c) in [("aluminium", &t.aluminium), ("wax", &t.wax)] {
+            let given = [("aluminium", &t.aluminium), ("wax", &t.wax)].into_iter().zip(t.given);
+            for (name, c) in given.filter(|(_, g)| *g).map(|(c, _)| c) {
                 pos(&f(&format!("{name}.feed_mm_min")), c.feed_mm_min)?;
                 pos(&f(&format!("{name}.plunge_mm_min")), c.plunge_mm_min)?;
                 pos(&f(&format!("{name}.spindle_rpm")), c.spindle_rpm)?;
@@ -562,6 +612,24 @@ impl Machine {
             }
         }
         Ok(())
+    }
+
+    /// Every tool's cutting data the profile does not give, from the table for this machine (after
+    /// [`Machine::validate`], which checks the figures the table is limited by).
+    fn fill_cutting_data(&mut self) {
+        let lim = crate::cut::feeds::Limits::of(self);
+        for t in &mut self.tools {
+            let d = t.diameter_mm();
+            for (k, stock) in [Stock::Aluminium, Stock::Wax].into_iter().enumerate() {
+                if !t.given[k] {
+                    let c = crate::cut::feeds::derive(d, t.flutes, stock, &lim);
+                    match stock {
+                        Stock::Aluminium => t.aluminium = c,
+                        Stock::Wax => t.wax = c,
+                    }
+                }
+            }
+        }
     }
 
     /// The machine's errors (perfect when the profile declares none).
@@ -612,9 +680,22 @@ mod tests {
         let uk: S = toml::from_str("stock = \"aluminium\"").unwrap();
         assert_eq!(us.stock, uk.stock);
         let text = include_str!("../../machines/grbl-3018.toml");
-        let uk = Machine::parse(text).unwrap();
-        let us = Machine::parse(&text.replace("aluminium = {", "aluminum = {")).unwrap();
+        let given = |key: &str| {
+            text.replacen(
+                "flute_length_mm = 3.0\n",
+                &format!(
+                    "flute_length_mm = 3.0\n{key} = {{ feed_mm_min = 150.0, plunge_mm_min = 50.0, spindle_rpm = 10000.0, \
+                     max_depth_of_cut_mm = 0.1 }}\n"
+                ),
+                1,
+            )
+        };
+        let uk = Machine::parse(&given("aluminium")).unwrap();
+        let us = Machine::parse(&given("aluminum")).unwrap();
         assert_eq!(us, uk);
+        assert!(uk.tools[0].data_given(Stock::Aluminium) && uk.tools[0].aluminium.feed_mm_min == 150.0);
+        // the other tools' data come from the table
+        assert!(!uk.tools[1].data_given(Stock::Aluminium) && uk.tools[1].aluminium.feed_mm_min > 0.0);
     }
 
     fn shipped() -> Vec<std::path::PathBuf> {

@@ -7,6 +7,7 @@
 pub mod accuracy;
 pub mod dropcutter;
 pub(crate) mod estimate;
+pub mod feeds;
 pub mod machine;
 pub(crate) mod morphology;
 pub(crate) mod stock;

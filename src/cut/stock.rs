@@ -318,8 +318,15 @@ mod tests {
                 for i in 0..grid.nx {
                     let (x, y) = (grid.x0 + (i as f64 + 0.5) * 0.01, grid.y0 + (j as f64 + 0.5) * 0.01);
                     let r = sweeps.iter().map(|s| s.lowest(x, y)).fold(0.0, f64::min);
+                    // the bull's sweep is certified within BULL_TOLERANCE_MM (Newton's path, and so its last
+                    // digits, moves with the last bits of the cell's coordinates)
+                    let tol = if matches!(bit, Shape::Bull { .. }) {
+                        crate::cut::sweep::BULL_TOLERANCE_MM
+                    } else {
+                        1e-12
+                    };
                     assert!(
-                        (z[j * grid.nx + i] - r).abs() < 1e-12,
+                        (z[j * grid.nx + i] - r).abs() < tol,
                         "{bit:?} ({i},{j}): {} vs {r}",
                         z[j * grid.nx + i]
                     );

@@ -19,9 +19,11 @@
 //!   `[0, 1]`; the minimum is its lower end (endpoints ordered so that `dz ≥ 0`). Closed form.
 //! - **Bull** (radius `R`, corner radius `rc`, flat of radius `R0 = R − rc`, `prof = rc − sqrt(rc² − (ρ −
 //!   R0)²)` beyond `R0`): no practical closed form (the stationary point solves a quartic). `f` is convex,
-//!   so bisection on the sign of `f'` with the tangent lines at the bracket's ends as a certified lower
-//!   bound, stopped when the bound is within [`BULL_TOLERANCE_MM`] of the best value found; the value
-//!   returned is the best found, never below the true minimum and at most that tolerance above it.
+//!   so Newton's method on `f'`, safeguarded by bisection on its sign, from the stationary point of the
+//!   ball of radius `rc` at the distance `h − R0` (near the bull's for a thin flat such as a runout's), with
+//!   certified lower bounds (tangents of the convex `f`), stopped when a bound is within
+//!   [`BULL_TOLERANCE_MM`] of the best value found; the value returned is the best found, never below the
+//!   true minimum and at most that tolerance above it.
 //!
 //! A segment whose horizontal length is below [`VERTICAL_MM`] is taken as vertical (a plunge or a retract):
 //! the lowest point is then the lower end's.
@@ -300,22 +302,50 @@ impl Sweep {
         (hits, drop)
     }
 
-    /// Minimum of the convex `f(t) = z(t) + prof(ρ(t))` over `[lo, hi]` by bisection on the sign of `f'`,
-    /// with a certified lower bound from the tangents at the bracket's ends (see the module comment).
+    /// Minimum of the convex `f(t) = z(t) + prof(ρ(t))` over `[lo, hi]`: Newton's method on `f'` from the
+    /// stationary point of the ball of radius `rc` at the distance `h − R0` (the bull is that ball widened by
+    /// `R0`, so its minimum lies near there), safeguarded by the bracket `[a, b]` on the sign of `f'` (a step
+    /// that leaves it, or does not halve it twice running, is a bisection). Certified by two lower bounds of
+    /// the convex `f`: the tangent at the last point, `f(t) − |f'(t)|·(b − a)`, and the tangents at the
+    /// bracket's ends; stopped when either is within [`BULL_TOLERANCE_MM`] of the best value found.
+    ///
+    /// With `s = ρ − R0 > 0` and `q = rc² − s²`: `prof' = s / √q`, `prof'' = rc² / q^{3/2}`; `ρ' = L²(t − t_p)/ρ`,
+    /// `ρ'' = L² h² / ρ³`; `f' = dz + prof'·ρ'`, `f'' = prof''·ρ'² + prof'·ρ''` (both 0 on the flat, `s ≤ 0`).
     fn bull_min(&self, h2: f64, tp: f64, lo: f64, hi: f64) -> f64 {
+        let Shape::Bull {
+            corner_radius_mm: rc, ..
+        } = self.bit
+        else {
+            unreachable!("bull_min on a {:?}", self.bit)
+        };
+        let r0 = self.r - rc;
+        let rc2 = rc * rc;
         let l2 = if self.inv_l2 > 0.0 { 1.0 / self.inv_l2 } else { 0.0 };
-        let rho = |t: f64| (h2 + l2 * (t - tp) * (t - tp)).sqrt();
-        let f = |t: f64| self.az + t * self.dz + self.bit.profile(rho(t));
-        let df = |t: f64| {
-            let rh = rho(t);
-            let dr = if rh > 0.0 { l2 * (t - tp) / rh } else { 0.0 };
-            let s = self.bit.profile_slope(rh);
+        // (f, f', f'') at t
+        let eval = |t: f64| -> (f64, f64, f64) {
+            let u = t - tp;
+            let rho = (h2 + l2 * u * u).sqrt();
+            let z = self.az + t * self.dz;
+            let s = rho - r0;
+            if s <= 0.0 {
+                return (z, self.dz, 0.0);
+            }
+            let q = (rc2 - s * s).max(0.0);
+            let sq = q.sqrt();
+            let (p0, p1) = (rc - sq, if sq > 0.0 { s / sq } else { f64::INFINITY });
+            let p2 = if q > 0.0 { rc2 / (q * sq) } else { f64::INFINITY };
+            let (r1, r2) = if rho > 0.0 {
+                (l2 * u / rho, l2 * h2 / (rho * rho * rho))
+            } else {
+                (0.0, 0.0)
+            };
             // 0·∞ at a tangent point of the rim: the slope there is that of z alone
-            self.dz + if dr == 0.0 { 0.0 } else { s * dr }
+            let d1 = self.dz + if r1 == 0.0 { 0.0 } else { p1 * r1 };
+            let d2 = p2 * r1 * r1 + if r2 == 0.0 { 0.0 } else { p1 * r2 };
+            (z + p0, d1, d2)
         };
         let (mut a, mut b) = (lo, hi);
-        let (mut fa, mut fb) = (f(a), f(b));
-        let (mut da, mut db) = (df(a), df(b));
+        let ((mut fa, mut da, _), (mut fb, mut db, _)) = (eval(a), eval(b));
         if hi - lo <= 0.0 || da >= 0.0 {
             return fa;
         }
@@ -323,26 +353,42 @@ impl Sweep {
             return fb;
         }
         let mut best = fa.min(fb);
+        let hs = (h2.sqrt() - r0).max(0.0);
+        let mut t = tp - (rc2 - hs * hs).max(0.0).sqrt() * self.c1;
+        if !(t > a && t < b) {
+            t = 0.5 * (a + b);
+        }
+        let mut slow = 0;
         for _ in 0..200 {
-            let lower = if da.is_finite() && db.is_finite() && db > da {
-                let t = (fb - fa + da * a - db * b) / (da - db);
-                fa + da * (t - a)
+            let (ft, dt, d2t) = eval(t);
+            best = best.min(ft);
+            if dt == 0.0 {
+                break;
+            }
+            let w = b - a;
+            if dt < 0.0 {
+                (a, fa, da) = (t, ft, dt);
+            } else {
+                (b, fb, db) = (t, ft, dt);
+            }
+            let at_t = ft - dt.abs() * (b - a);
+            let ends = if da.is_finite() && db.is_finite() && db > da {
+                let x = (fb - fa + da * a - db * b) / (da - db);
+                fa + da * (x - a)
             } else {
                 f64::NEG_INFINITY
             };
-            if best - lower <= BULL_TOLERANCE_MM || b - a <= 1e-15 {
+            if best - at_t.max(ends) <= BULL_TOLERANCE_MM || b - a <= 1e-15 {
                 break;
             }
-            let m = 0.5 * (a + b);
-            let (fm, dm) = (f(m), df(m));
-            best = best.min(fm);
-            if dm < 0.0 {
-                (a, fa, da) = (m, fm, dm);
-            } else if dm > 0.0 {
-                (b, fb, db) = (m, fm, dm);
+            slow = if b - a > 0.5 * w { slow + 1 } else { 0 };
+            let newton = t - dt / d2t;
+            t = if slow < 2 && newton > a && newton < b {
+                newton
             } else {
-                break;
-            }
+                slow = 0;
+                0.5 * (a + b)
+            };
         }
         best
     }

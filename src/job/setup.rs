@@ -10,7 +10,8 @@
 //! [`CLAMP_MM`] on every side for clamps; a vise gripping below the top or tape needs no clamp margin.
 
 use super::Ready;
-use crate::cut::machine::{Stock, Tool};
+use crate::cut::feeds::ToolData;
+use crate::cut::machine::Tool;
 use crate::gcode::Dialect;
 use crate::stages::simulate::Deviation;
 use crate::stages::toolpath::{self, Summary};
@@ -25,10 +26,6 @@ pub const CLAMP_MM: f64 = 10.0;
 pub const STICKOUT_CLEARANCE_MM: f64 = 2.0;
 /// Stock left under the deepest cut, mm.
 pub const FLOOR_MM: f64 = 2.0;
-
-/// Surface speed of carbide in aluminium below which the sheet warns, m/min (the low end of carbide
-/// makers' data for aluminium alloys, 300 SFM ≈ 90 m/min).
-pub const ALUMINIUM_MIN_SURFACE_M_MIN: f64 = 90.0;
 
 /// The stock rectangle `[x0, y0, x1, y1]` in work mm and the pad's centre, for a cut whose tip extents are
 /// `lo`, `hi` with tools of largest radius `r`.
@@ -46,59 +43,14 @@ pub fn stock_rect(lo: [f64; 3], hi: [f64; 3], r: f64) -> ([f64; 4], [f64; 2]) {
     )
 }
 
-/// What is wrong with a tool's cutting data on this machine, if anything: chip load under the runout, surface
-/// speed too low for carbide in aluminium, no coolant or air in aluminium; each with what would work.
-pub fn cutting_advice(tool: &Tool, stock: Stock, runout_um: f64, coolant_off: bool, max_rpm: f64) -> Vec<String> {
-    let c = tool.cutting(stock);
-    let chip_um = tool.chip_load_um(c.feed_mm_min, c.spindle_rpm);
-    let v = tool.surface_speed_m_min(c.spindle_rpm);
-    let mut out = vec![];
-    if tool.flutes > 1 && chip_um < runout_um {
-        out.push(format!(
-            "{chip_um:.1} µm/tooth is below the machine's {runout_um} µm runout: one flute does the cutting and the \
-             others rub (a chip load above the runout, or a better collet, shares the cut)"
-        ));
-    }
-    if stock == Stock::Aluminium && v < ALUMINIUM_MIN_SURFACE_M_MIN {
-        let rpm = c.spindle_rpm * ALUMINIUM_MIN_SURFACE_M_MIN / v;
-        out.push(format!(
-            "{v:.1} m/min of surface speed at the ball's full diameter (less where near-flat facets cut near its \
-             tip, where it is zero) is far below carbide's {ALUMINIUM_MIN_SURFACE_M_MIN:.0} m/min in aluminium: it \
-             would take {rpm:.0} rpm{}; machining wax or a larger ball suits this spindle",
-            if rpm > max_rpm {
-                format!(" (this spindle reaches {max_rpm:.0})")
-            } else {
-                String::new()
-            }
-        ));
-    }
-    if stock == Stock::Aluminium && coolant_off {
-        out.push(
-            "aluminium welds to a small bit: mist or an air blast to clear the chips (the profile's coolant is off)"
-                .into(),
-        );
-    }
-    out
-}
-
-/// One tool's line: shape, stick-out, cutting data and advice.
-fn tool_line(ready: &Ready, tool: &Tool, depth_mm: f64) -> String {
-    let t = &ready.job.toolpath;
-    let c = tool.cutting(t.stock);
-    let chip_um = tool.chip_load_um(c.feed_mm_min, c.spindle_rpm);
-    let v = tool.surface_speed_m_min(c.spindle_rpm);
-    let m = &ready.machine;
-    let advice = cutting_advice(
-        tool,
-        t.stock,
-        m.accuracy().runout_um,
-        m.program.coolant == crate::gcode::moves::Coolant::Off,
-        m.spindle.max_rpm,
-    );
-    format!(
+/// One tool's line — shape, stick-out, cutting data and where they came from — and what is wrong with its
+/// data on this machine, each with what would work.
+fn tool_line(tool: &Tool, c: &ToolData, depth_mm: f64) -> (String, Vec<String>) {
+    let a = &c.assessment;
+    let line = format!(
         "T{} {}: {} {:.3} mm, {} flutes; stick-out at least {:.1} mm (the cut's {:.3} mm depth and {STICKOUT_CLEARANCE_MM} mm \
-         for the collet over the stock); {} mm/min, plunge {} mm/min, {} rpm: {chip_um:.1} µm/tooth, {v:.1} m/min, \
-         {} mm depth of cut{}",
+         for the collet over the stock); {} mm/min, plunge {} mm/min, {} rpm, {} mm depth of cut ({}): {:.1} µm/tooth \
+         (this bit takes {:.1}–{:.1}), {:.1} m/min",
         tool.number,
         tool.id,
         tool.shape.kind(),
@@ -106,29 +58,33 @@ fn tool_line(ready: &Ready, tool: &Tool, depth_mm: f64) -> String {
         tool.flutes,
         depth_mm + STICKOUT_CLEARANCE_MM,
         depth_mm,
-        c.feed_mm_min,
-        c.plunge_mm_min,
-        c.spindle_rpm,
-        c.max_depth_of_cut_mm,
-        if advice.is_empty() {
-            String::new()
+        c.data.feed_mm_min,
+        c.data.plunge_mm_min,
+        c.data.spindle_rpm,
+        c.data.max_depth_of_cut_mm,
+        if c.from_table {
+            "the tool × stock table's for this machine"
         } else {
-            format!(". Check: {}", advice.join("; "))
-        }
-    )
+            "the profile's"
+        },
+        a.chip_um,
+        a.chip_range_um[0],
+        a.chip_range_um[1],
+        a.surface_m_min,
+    );
+    (line, a.findings.iter().map(|f| f.text()).collect())
 }
 
 /// The sheet's rows (the report's "To mill this" table).
 pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation) -> Vec<(String, String)> {
     let t = &ready.job.toolpath;
-    // the tools in the order the programs use them
-    let tools: Vec<&Tool> = s
-        .files
+    // the tools in the order the programs use them, with their data as the programs use them
+    let tools: Vec<(&Tool, &ToolData)> = s
+        .cutting
         .iter()
-        .flat_map(|f| &f.tools)
-        .filter_map(|id| ready.machine.tool(id).ok())
+        .filter_map(|c| Some((ready.machine.tool(&c.id).ok()?, c)))
         .collect();
-    let r = tools.iter().map(|t| t.radius_mm()).fold(0.0, f64::max);
+    let r = tools.iter().map(|(t, _)| t.radius_mm()).fold(0.0, f64::max);
     let [lo, hi] = s.extents_mm;
     let ([x0, y0, x1, y1], pad) = stock_rect(lo, hi, r);
     let depth = -lo[2];
@@ -187,14 +143,21 @@ pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation)
                 -x0, -y0, pad[0], pad[1]
             ),
         ),
-        (
-            "tools, in order".into(),
-            tools
-                .iter()
-                .map(|tool| tool_line(ready, tool, depth))
-                .collect::<Vec<_>>()
-                .join(" — then "),
-        ),
+    ];
+    // a row per tool in the order the programs use them, and what to check about its cutting data
+    for (k, (tool, c)) in tools.iter().enumerate() {
+        let (line, findings) = tool_line(tool, c, depth);
+        let key = if tools.len() > 1 {
+            format!("tool {} of {}", k + 1, tools.len())
+        } else {
+            "tool".into()
+        };
+        rows.push((key, line));
+        if !findings.is_empty() {
+            rows.push((format!("T{} cutting data", tool.number), findings.join("; ")));
+        }
+    }
+    rows.extend([
         ("check, then run".into(), run_advice(dialect, s)),
         (
             "relief".into(),
@@ -203,7 +166,7 @@ pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation)
                 s.depth_mm
             ),
         ),
-    ];
+    ]);
     rows.extend(numbers(s, dev));
     rows
 }

@@ -9,8 +9,9 @@
 //! levels by their stock check — so at the start `p` of a run no stock stands above the tool's lower
 //! surface placed at `z₀`: for any cell at offset `d`, `before ≤ after + doc ≤ ball_p(d) + doc`; a roughing
 //! layer lowers that to the layer before it plus the ridges its tool leaves between paths — the stock the
-//! earlier layers left — which the acceptance tests check against the simulated stock; the final raster,
-//! whose stock the builder has swept, lowers it to 5 µm above the stock's own cutter location at `p`), then
+//! earlier layers left — which the acceptance tests check against the simulated stock; the finishing levels
+//! and the final raster, whose stock the builder has swept, lower it to 5 µm above the stock's own cutter
+//! location at `p`), then
 //! ramp into the material along the run itself at the tool's `max_ramp_deg` θ at most: back and forth over
 //! its first `a = Δ/(2m·tanθ)` mm in `m` legs until `Δ = z₀ − z` is descended, never below the run's own
 //! cutter locations (so never below the design). A run too short for 50 legs is entered by a straight

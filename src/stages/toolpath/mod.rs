@@ -24,7 +24,7 @@ pub use plan::{ToolpathPlan, MAX_CL_POINTS, MAX_GRID_CELLS, MAX_PASSES, MAX_TOLE
 
 use crate::base::heightfield::Heightfield;
 use crate::cut::machine::{self, Machine, Stock, Tool};
-use crate::cut::{dropcutter, estimate};
+use crate::cut::{dropcutter, estimate, feeds};
 use crate::gcode::emit;
 use crate::gcode::moves::{self, Move, P3};
 use build::Builder;
@@ -49,7 +49,8 @@ pub enum Strategy {
 pub struct ToolpathConfig {
     /// Finishing tool id in the machine profile (a ball-nose).
     pub tool: String,
-    /// Roughing tool id (ball or flat); the finishing tool when empty.
+    /// Roughing tool id (ball or flat); when empty, the profile's `program.roughing_tool` if it is larger
+    /// than the finishing tool, else the finishing tool.
     pub rough_tool: String,
     /// Stock material, selects the cutting data.
     pub stock: Stock,
@@ -98,13 +99,14 @@ impl Default for ToolpathConfig {
 }
 
 impl ToolpathConfig {
-    /// The tools in the order the program uses them, for summaries: the finishing tool alone, or the
-    /// roughing tool then the finishing tool.
-    pub fn tools_in_order(&self) -> String {
-        if self.rough_tool.is_empty() || self.rough_tool == self.tool {
+    /// The tools in the order the program uses them, for summaries, given the program's roughing tool
+    /// ([`Summary::roughing_tool`]; empty without roughing): the finishing tool alone, or the roughing tool
+    /// then the finishing tool.
+    pub fn tools_in_order(&self, roughing_tool: &str) -> String {
+        if roughing_tool.is_empty() || roughing_tool == self.tool {
             format!("`{}` for every pass", self.tool)
         } else {
-            format!("`{}` (roughing), then `{}` (finishing)", self.rough_tool, self.tool)
+            format!("`{roughing_tool}` (roughing), then `{}` (finishing)", self.tool)
         }
     }
 }
@@ -199,6 +201,10 @@ pub struct Summary {
     /// The program files, in the order they run (one unless GRBL changes tools: one per tool).
     #[serde(default)]
     pub files: Vec<files::FileSummary>,
+    /// The cutting data of each tool the program uses, in order, with where they came from (the profile or
+    /// the tool × stock table) and what is wrong with them on this machine (`cut::feeds`).
+    #[serde(default)]
+    pub cutting: Vec<feeds::ToolData>,
 }
 
 /// A finished program.
@@ -531,6 +537,14 @@ fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, Toolpath
         air_feed_mm: None,
         air_feed_s: None,
         files: program_files.iter().map(|f| f.summary.clone()).collect(),
+        cutting: {
+            let lim = feeds::Limits::of(machine);
+            let roughs = layers > 0 && rough.id != tool.id;
+            let r = roughs.then(|| feeds::tool_data(rough, cfg.stock, rough.cutting(cfg.stock).feed_mm_min, &lim));
+            r.into_iter()
+                .chain([feeds::tool_data(tool, cfg.stock, feed, &lim)])
+                .collect()
+        },
     };
     Ok(Toolpath {
         moves,

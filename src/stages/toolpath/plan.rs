@@ -54,6 +54,19 @@ pub struct ToolpathPlan {
     pub notes: Vec<String>,
 }
 
+/// The tool a job roughs with when it names none: the profile's `program.roughing_tool` when it is larger
+/// than the finishing tool (a smaller one gains nothing), else the finishing tool. It cuts only when the
+/// relief is deeper than the finishing tool's depth of cut.
+fn default_rough<'a>(machine: &'a Machine, tool: &'a Tool) -> &'a Tool {
+    machine
+        .program
+        .roughing_tool
+        .as_deref()
+        .and_then(|id| machine.tool(id).ok())
+        .filter(|r| r.diameter_mm() > tool.diameter_mm())
+        .unwrap_or(tool)
+}
+
 /// `ToolpathError::Limit` naming the field and the estimate.
 pub(super) fn limit(field: &str, what: String) -> ToolpathError {
     ToolpathError::Limit {
@@ -80,7 +93,7 @@ impl ToolpathConfig {
             ));
         }
         let rough = if self.rough_tool.is_empty() {
-            tool
+            default_rough(machine, tool)
         } else {
             machine
                 .tool(&self.rough_tool)

@@ -114,6 +114,10 @@ pub struct Level<'a> {
     pub pitch_mm: f64,
     /// Simplification tolerance, mm.
     pub tol_mm: f64,
+    /// Per point, when known: the tool's cutter location over the stock as the level meets it (the lowest
+    /// its tip can sit there without touching it), mm. A run's entry then descends straight to just above
+    /// it instead of ramping from a depth of cut above the run (the finishing levels know their stock).
+    pub stock_cl: Option<&'a [Vec<f64>]>,
 }
 
 /// Emit one level: each pass's cutting runs; the next pass's first run is linked along the surface
@@ -122,8 +126,9 @@ pub struct Level<'a> {
 pub fn emit_level(b: &mut Builder, lv: &Level, link: &dyn Fn(P3, P3) -> Vec<P3>) {
     let mut first = true;
     let mut row_end: Option<P3> = None;
-    for (row, cut) in lv.rows.iter().zip(lv.cut) {
+    for (r, (row, cut)) in lv.rows.iter().zip(lv.cut).enumerate() {
         for (n, (i0, i1)) in cutting_runs(cut, lv.gap_points).into_iter().enumerate() {
+            let stock_cl = lv.stock_cl.map(|s| s[r][i0]);
             let run = simplify::simplify(&row[i0..=i1], lv.tol_mm);
             if run.is_empty() {
                 continue;
@@ -133,7 +138,7 @@ pub fn emit_level(b: &mut Builder, lv: &Level, link: &dyn Fn(P3, P3) -> Vec<P3>)
                 n == 0 && d <= 1.5 * lv.stepover_mm + 2.0 * lv.pitch_mm
             });
             if first || !near {
-                b.approach(&run, None);
+                b.approach(&run, stock_cl);
                 first = false;
             } else {
                 let l = link(b.at, run[0]);
@@ -180,6 +185,7 @@ pub fn emit(
             gap_points,
             pitch_mm,
             tol_mm: tol,
+            stock_cl: None,
         };
         // no stock above the layer before but the ridges between its paths
         b.entry_ceiling_z = zp + rp.scallop_mm + super::build::ENTRY_MARGIN_MM;
