@@ -1,4 +1,4 @@
-//! Streaming throughput against the virtual GRBL 1.1 controller over a real pseudo-terminal (the README's
+//! Streaming throughput against the virtual GRBL 1.1 controller over a real pseudo-terminal (docs/PERFORMANCE.md's
 //! performance table): 10,000 lines at 115200 baud as a share of the link's byte rate (baud/10 bytes/s,
 //! 8N1), and short lines by character counting against send-and-wait over the same link, with motion
 //! simulated 10⁴× faster than real time, so the link, not the controller, is the bottleneck; then a

@@ -3,7 +3,7 @@
 //! mutated input must be read or refused — never a panic — and a refusal of a file names it.
 //!
 //! The case count per reader is `BRDFMILL_FUZZ_CASES` (default 24, so `cargo test` stays quick); the
-//! campaign in README's reliability section is `BRDFMILL_FUZZ_CASES=80 cargo test --release --test
+//! campaign in docs/VALIDATION.md's reliability section is `BRDFMILL_FUZZ_CASES=80 cargo test --release --test
 //! fuzz_readers -- --nocapture`, which prints the counts per reader. Inputs are reproducible: the random
 //! stream is seeded per reader.
 

@@ -81,7 +81,7 @@ fn a_surface_smooth_at_the_wavelength_scale_approaches_geometric_optics() {
     };
     let slice = wave::fft_slice(&surf, &Vec3::new(0.0, 0.0, 1.0), &cfg).unwrap();
     let (p, wx, wy) = wave::slope_marginals(&slice);
-    // Against the geometric module's histogram of central-difference slopes (the figures README quotes).
+    // Against the geometric module's histogram of central-difference slopes (the figures docs/CLI.md quotes).
     let slopes = brdfmill::base::surface::slopes(&hf, 0.0, 1);
     let (gx, gy) = wave::geometric_marginals(&slopes, &p, &slice, cfg.sigma_um);
     let l1_geo = brdfmill::base::distance::relative_l1(&wx, &gx);

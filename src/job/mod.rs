@@ -6,7 +6,7 @@
 //! name = "isotropic GGX, aluminium"
 //!
 //! [target]
-//! brdf = "ggx:alpha=0.3,material=aluminium"  # any BRDF spec (see README)
+//! brdf = "ggx:alpha=0.3,material=aluminium"  # any BRDF spec (see docs/CLI.md)
 //! base = "scallop"                           # the base lobe deconvolved: "scallop" (the finishing raster's
 //!                                            # own lobe, computed from the bit and stepover), "none", or a spec
 //! polish = "beckmann:alpha=0.05"             # optional: the material's own polish lobe (with base = "scallop"
