@@ -620,13 +620,12 @@ impl Machine {
         let lim = crate::cut::feeds::Limits::of(self);
         for t in &mut self.tools {
             let d = t.diameter_mm();
-            for (k, stock) in [Stock::Aluminium, Stock::Wax].into_iter().enumerate() {
-                if !t.given[k] {
-                    let c = crate::cut::feeds::derive(d, t.flutes, stock, &lim);
-                    match stock {
-                        Stock::Aluminium => t.aluminium = c,
-                        Stock::Wax => t.wax = c,
-                    }
+            for (given, stock, data) in [
+                (t.given[0], Stock::Aluminium, &mut t.aluminium),
+                (t.given[1], Stock::Wax, &mut t.wax),
+            ] {
+                if !given {
+                    *data = crate::cut::feeds::derive(d, t.flutes, stock, &lim);
                 }
             }
         }
