@@ -78,9 +78,10 @@ impl Heightfield {
         Ok(())
     }
 
-    /// Write the heights as a `.npy` array of shape `(ny, nx)`, mm.
+    /// Write the heights as a `.npy` array of shape `(ny, nx)`, mm, in single precision (`float32`: half the
+    /// bytes of `float64`, and at most 0.06 nm off on a height of 1 mm, far below any cut or step grid).
     pub fn write_npy(&self, path: &Path) -> Result<(), crate::base::io::WriteError> {
-        crate::base::npy::write_f64_2d(path, self.ny, self.nx, &self.z_mm)
+        crate::base::npy::write_f32_2d(path, self.ny, self.nx, &self.z_mm)
     }
 
     /// A shaded relief (hill shading lit from the upper left, tinted by height) with axes in mm, at most

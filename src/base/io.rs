@@ -86,8 +86,43 @@ where
     Ok(())
 }
 
+/// A path as people read it: `a/./b` → `a/b`, `examples/../machines/x.toml` → `machines/x.toml` (lexical
+/// only — a `..` after a symbolic link is not resolved; leading `..` are kept).
+pub fn tidy(path: &Path) -> std::path::PathBuf {
+    use std::path::Component;
+    let mut out: Vec<Component> = vec![];
+    for c in path.components() {
+        match c {
+            Component::CurDir => {}
+            Component::ParentDir if matches!(out.last(), Some(Component::Normal(_))) => {
+                out.pop();
+            }
+            c => out.push(c),
+        }
+    }
+    if out.is_empty() {
+        ".".into()
+    } else {
+        out.iter().collect()
+    }
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn tidy_paths_read_as_people_write_them() {
+        use super::tidy;
+        use std::path::Path;
+        assert_eq!(
+            tidy(Path::new("examples/../machines/grbl-3018.toml")),
+            Path::new("machines/grbl-3018.toml")
+        );
+        assert_eq!(tidy(Path::new("./a/./b")), Path::new("a/b"));
+        assert_eq!(tidy(Path::new("../x/../y")), Path::new("../y"));
+        assert_eq!(tidy(Path::new("/a/b/../../..")), Path::new("/.."));
+        assert_eq!(tidy(Path::new("a/..")), Path::new("."));
+    }
+
     use super::*;
 
     #[cfg(unix)]

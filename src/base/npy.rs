@@ -1,4 +1,5 @@
-//! NumPy `.npy` arrays of `f64` (via `npyz`), so any Python user can load grids and heightfields.
+//! NumPy `.npy` arrays (via `npyz`), so any Python user can load grids and heightfields: `f64`, or `f32`
+//! for the large heightfields (half the bytes); read back as `f64` from either.
 
 use npyz::WriterBuilder;
 use std::path::Path;
@@ -9,7 +10,7 @@ pub enum NpyError {
     /// A file could not be opened or read.
     #[error(transparent)]
     Io(#[from] crate::base::io::ReadError),
-    /// Not a 2D little-endian float64 C-order array.
+    /// Not a 2D little-endian float64 or float32 C-order array.
     #[error("{path}: {reason}")]
     Format {
         /// The file.
@@ -29,6 +30,21 @@ pub fn write_f64_2d(path: &Path, rows: usize, cols: usize, data: &[f64]) -> Resu
             .writer(w)
             .begin_nd()?;
         writer.extend(data.iter().copied())?;
+        writer.finish()
+    })
+}
+
+/// Write a row-major `rows × cols` array as `.npy` of `f32` (C order, little-endian), atomically: each
+/// value rounded to the nearest `f32`, a relative error of at most 2⁻²⁴ (0.06 nm on a height of 1 mm).
+pub fn write_f32_2d(path: &Path, rows: usize, cols: usize, data: &[f64]) -> Result<(), crate::base::io::WriteError> {
+    assert_eq!(data.len(), rows * cols, "npy shape does not match the data");
+    crate::base::io::write_atomic_with(path, |w| {
+        let mut writer = npyz::WriteOptions::<f32>::new()
+            .default_dtype()
+            .shape(&[rows as u64, cols as u64])
+            .writer(w)
+            .begin_nd()?;
+        writer.extend(data.iter().map(|&v| v as f32))?;
         writer.finish()
     })
 }
@@ -60,7 +76,7 @@ fn header_shape(bytes: &[u8]) -> Option<Vec<Option<String>>> {
     )
 }
 
-/// Read a 2D `f64` array (C order); returns `(rows, cols, data)`.
+/// Read a 2D `f64` or `f32` array (C order) as `f64`; returns `(rows, cols, data)`.
 pub fn read_f64_2d(path: &Path) -> Result<(usize, usize, Vec<f64>), NpyError> {
     let bytes = crate::base::io::read(path)?;
     let fmt = |reason: String| NpyError::Format {
@@ -100,9 +116,17 @@ pub fn read_f64_2d(path: &Path) -> Result<(usize, usize, Vec<f64>), NpyError> {
             shape[0], shape[1]
         )));
     };
-    let data: Vec<f64> = npy
-        .into_vec::<f64>()
-        .map_err(|e| fmt(format!("expected float64 values: {e}")))?;
+    let single = matches!(npy.dtype(), npyz::DType::Plain(t) if t.to_string() == "<f4");
+    let data: Vec<f64> = if single {
+        npy.into_vec::<f32>()
+            .map_err(|e| fmt(format!("expected float32 values: {e}")))?
+            .into_iter()
+            .map(f64::from)
+            .collect()
+    } else {
+        npy.into_vec::<f64>()
+            .map_err(|e| fmt(format!("expected float64 or float32 values: {e}")))?
+    };
     if data.len() != count {
         return Err(fmt(format!(
             "shape ({rows}, {cols}) is {count} values, the file holds {}",
@@ -130,6 +154,24 @@ mod tests {
             "{header}"
         );
         assert_eq!(read_f64_2d(&p).unwrap(), (3, 4, data));
+    }
+
+    /// Single precision: the dtype NumPy reads as float32, and every value back within half an f32 ulp.
+    #[test]
+    fn single_precision_round_trip() {
+        let dir = tempfile::tempdir().unwrap();
+        let p = dir.path().join("a.npy");
+        let data: Vec<f64> = (0..12).map(|k| (k as f64 * 0.1 - 0.7) / 3.0).collect();
+        write_f32_2d(&p, 4, 3, &data).unwrap();
+        let bytes = std::fs::read(&p).unwrap();
+        let header = String::from_utf8_lossy(&bytes[10..80]);
+        assert!(header.contains("'<f4'") && header.contains("'shape': (4, 3"), "{header}");
+        assert_eq!(bytes.len(), 128 + 12 * 4);
+        let (rows, cols, back) = read_f64_2d(&p).unwrap();
+        assert_eq!((rows, cols), (4, 3));
+        for (a, b) in data.iter().zip(&back) {
+            assert!((a - b).abs() <= a.abs() * 2f64.powi(-24), "{a} read back as {b}");
+        }
     }
 
     #[test]

@@ -11,7 +11,14 @@ pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) 
     let tool = ready
         .machine
         .tool(&job.toolpath.tool)
-        .map(|t| format!("{} ({} mm ball), stock {:?}", t.id, t.diameter_mm(), job.toolpath.stock))
+        .map(|t| {
+            format!(
+                "{} ({} mm ball), stock {}",
+                t.id,
+                t.diameter_mm(),
+                job.toolpath.stock.name()
+            )
+        })
         .unwrap_or_else(|e| e.to_string());
     vec![
         ("target BRDF".into(), n.brdf_spec.clone()),
@@ -23,8 +30,9 @@ pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) 
         (
             "deconvolution".into(),
             format!(
-                "{} iterations ({:?})",
-                n.deconvolution.iterations, n.deconvolution.stopped_by
+                "{} iterations, {}",
+                n.deconvolution.iterations,
+                n.deconvolution.stopped_by.describe()
             ),
         ),
         (
@@ -64,7 +72,11 @@ pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) 
         ),
         (
             "machine".into(),
-            format!("{} ({})", ready.machine.name, ready.machine_path.display()),
+            format!(
+                "{} ({})",
+                ready.machine.name,
+                crate::base::io::tidy(&ready.machine_path).display()
+            ),
         ),
         ("tool".into(), tool),
         (

@@ -101,6 +101,17 @@ pub enum StoppedBy {
     None,
 }
 
+impl StoppedBy {
+    /// Why the iterations stopped, for people.
+    pub fn describe(self) -> &'static str {
+        match self {
+            StoppedBy::Tolerance => "stopped when an iteration changed the estimate by less than the tolerance",
+            StoppedBy::Count => "stopped at the iteration limit",
+            StoppedBy::None => "none needed: no base lobe",
+        }
+    }
+}
+
 /// What a Lucy–Richardson run did.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct LrReport {

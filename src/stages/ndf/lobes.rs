@@ -139,12 +139,14 @@ impl Kernel {
         }
         let label = match polish {
             None => format!(
-                "scallop({}, stepover={s_mm:.5} mm, angle={angle_deg}°)",
-                scallop_tool(tool)
+                "scallop({}, stepover={:.1} µm, angle={angle_deg}°)",
+                scallop_tool(tool),
+                s_mm * 1e3
             ),
             Some(b) => format!(
-                "scallop({}, stepover={s_mm:.5} mm, angle={angle_deg}°) * {}",
+                "scallop({}, stepover={:.1} µm, angle={angle_deg}°) * {}",
                 scallop_tool(tool),
+                s_mm * 1e3,
                 b.spec
             ),
         };
@@ -187,7 +189,8 @@ fn scallop_tool(tool: &crate::cut::tool::Shape) -> String {
     let r = tool.corner_radius_mm();
     let flat = tool.diameter_mm() - 2.0 * r;
     if flat > 0.0 {
-        format!("r={r} mm, flat={flat:.4} mm")
+        // sizes in mm, the runout's flat (µm-scale) in µm, as the rest of the page gives it
+        format!("r={r} mm, flat={:.1} µm", flat * 1e3)
     } else {
         format!("r={r} mm")
     }

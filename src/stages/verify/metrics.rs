@@ -122,6 +122,14 @@ pub struct Check {
     pub pass: bool,
 }
 
+impl Check {
+    /// Whether the bound applies to this target (a drawn highlight has no single peak direction: its
+    /// tolerance reads "not checked: …"); an unchecked row is shown as such, never as passed.
+    pub fn is_checked(&self) -> bool {
+        !self.tolerance.starts_with("not checked")
+    }
+}
+
 /// Directional albedo at one incident angle.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 pub struct Albedo {

@@ -579,7 +579,7 @@ fn light_strip(hf: &Heightfield, cells: [usize; 4], light: &[[f64; 3]], alpha: f
 /// The border profiles of every region.
 fn border_figure(regions: &[RegionMetrics]) -> Figure {
     use crate::base::plot::{LinePlot, Series, PALETTE};
-    let series = regions
+    let series: Vec<Series> = regions
         .iter()
         .enumerate()
         .flat_map(|(k, r)| {
@@ -592,14 +592,27 @@ fn border_figure(regions: &[RegionMetrics]) -> Figure {
                     color,
                     dashed: false,
                 },
+                // the border (a distance, mm) and the band it is measured against (a departure, µm) are
+                // two marks with a legend entry each
                 Series {
-                    label: format!("{} border {:.2} mm", r.name, r.border_mm),
+                    label: format!("{}: border {:.2} mm", r.name, r.border_mm),
                     points: vec![
                         (r.border_mm, 0.0),
                         (r.border_mm, BORDER_FACTOR * r.interior_deviation_um),
-                        (x1, BORDER_FACTOR * r.interior_deviation_um),
                     ],
                     color,
+                    dashed: true,
+                },
+                Series {
+                    label: format!(
+                        "{}: {BORDER_FACTOR}× the interior's {:.2} µm",
+                        r.name, r.interior_deviation_um
+                    ),
+                    points: vec![
+                        (r.border_mm, BORDER_FACTOR * r.interior_deviation_um),
+                        (x1, BORDER_FACTOR * r.interior_deviation_um),
+                    ],
+                    color: color.map(|c| ((u16::from(c) + 255) / 2) as u8),
                     dashed: true,
                 },
             ]
@@ -617,7 +630,7 @@ fn border_figure(regions: &[RegionMetrics]) -> Figure {
     Figure::new(
         "Region borders",
         format!(
-            "Each region's mean departure of the simulated cut from the composed design in {} µm bands of distance from the nearest other region. The dashed line marks the border width: beyond it no band departs more than {BORDER_FACTOR} times the region's interior. {}",
+            "Each region's mean departure of the simulated cut from the composed design in {} µm bands of distance from the nearest other region. The dashed upright line marks the border width, the paler dashed line {BORDER_FACTOR} times the interior's departure: beyond the border no band departs more than that. {}",
             BAND_MM * 1e3,
             regions
                 .iter()

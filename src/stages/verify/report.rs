@@ -3,7 +3,6 @@
 
 use super::metrics::SurfaceMetrics;
 use super::Metrics;
-use base64::Engine;
 
 /// A picture with a caption.
 pub struct Figure {
@@ -11,8 +10,10 @@ pub struct Figure {
     pub title: String,
     /// What it shows.
     pub caption: String,
-    /// PNG bytes.
+    /// The drawing as PNG bytes (the job's `.png` artifacts), text drawn in a bitmap font.
     pub png: Vec<u8>,
+    /// The drawing as an SVG element ([`crate::base::plot::Canvas::to_svg`]): text as text.
+    pub svg: String,
     /// Labels the figure could not draw as given ([`crate::base::plot::Canvas::label_defects`]); the page lists
     /// them under the figure with the class `label-defect`.
     pub label_defects: Vec<String>,
@@ -25,6 +26,7 @@ impl Figure {
             title: title.into(),
             caption: caption.into(),
             png: canvas.to_png(),
+            svg: canvas.to_svg(),
             label_defects: canvas.label_defects.clone(),
         }
     }
@@ -61,18 +63,43 @@ fn esc(s: &str) -> String {
         .replace('"', "&quot;")
 }
 
+/// Prose for the page: escaped, a `quoted` name (a key, a file, a tool, a spec) set as code rather than
+/// shown with its backticks; an unpaired backtick is dropped.
+pub(crate) fn rich(s: &str) -> String {
+    let parts: Vec<&str> = s.split('`').collect();
+    let paired = parts.len() % 2 == 1;
+    let mut out = String::with_capacity(s.len() + 16);
+    for (k, part) in parts.iter().enumerate() {
+        let code = k % 2 == 1 && (paired || k + 1 < parts.len());
+        if code {
+            out.push_str(&format!("<code>{}</code>", esc(part)));
+        } else {
+            out.push_str(&esc(part));
+        }
+    }
+    out
+}
+
 fn kv_table(rows: &[(String, String)]) -> String {
     let mut s = String::from("<table class=\"kv\">");
     for (k, v) in rows {
-        s.push_str(&format!("<tr><th>{}</th><td>{}</td></tr>", esc(k), esc(v)));
+        s.push_str(&format!("<tr><th>{}</th><td>{}</td></tr>", rich(k), rich(v)));
     }
     s.push_str("</table>");
     s
 }
 
+/// A metric's value: four decimals for every metric, so that one column reads at one precision (a
+/// relative albedo error of 7.6e-6 shows as 0.0000 beside 0.0032, not in another notation).
 fn fmt(v: f64) -> String {
-    if v == 0.0 || (v.abs() >= 1e-3 && v.abs() < 1e5) {
-        format!("{v:.4}")
+    if v.abs() < 1e5 {
+        let s = format!("{v:.4}");
+        // "-0.0000" is a sign without a value
+        if s.trim_start_matches('-').bytes().all(|b| b == b'0' || b == b'.') {
+            s.trim_start_matches('-').to_string()
+        } else {
+            s
+        }
     } else {
         format!("{v:.3e}")
     }
@@ -88,6 +115,9 @@ fn metrics_table(design: &SurfaceMetrics, milled: &SurfaceMetrics, ideal: Option
     s.push_str("</tr>");
     for (k, (d, m)) in design.checks.iter().zip(&milled.checks).enumerate() {
         let cell = |c: &super::metrics::Check| {
+            if !c.is_checked() {
+                return format!("<td class=\"unchecked\">{} (not checked)</td>", fmt(c.value));
+            }
             format!(
                 "<td class=\"{}\">{} {}</td>",
                 if c.pass { "pass" } else { "fail" },
@@ -97,8 +127,8 @@ fn metrics_table(design: &SurfaceMetrics, milled: &SurfaceMetrics, ideal: Option
         };
         s.push_str(&format!(
             "<tr><td>{}</td><td>{}</td>{}{}{}</tr>",
-            esc(&d.name),
-            esc(&d.tolerance),
+            rich(&d.name),
+            rich(&d.tolerance),
             cell(d),
             cell(m),
             ideal.and_then(|i| i.checks.get(k)).map(cell).unwrap_or_default()
@@ -111,33 +141,38 @@ fn metrics_table(design: &SurfaceMetrics, milled: &SurfaceMetrics, ideal: Option
 impl Report<'_> {
     /// The HTML text.
     pub fn to_html(&self) -> String {
-        let b64 = base64::engine::general_purpose::STANDARD;
         let mut h = String::with_capacity(1 << 20);
         h.push_str("<!DOCTYPE html>\n<html lang=\"en\"><head><meta charset=\"utf-8\">");
-        h.push_str(&format!("<title>brdfmill report — {}</title>", esc(&self.title)));
+        h.push_str(&format!(
+            "<title>brdfmill report — {}</title>",
+            esc(&self.title.replace('`', ""))
+        ));
         h.push_str(
             "<style>body{font-family:system-ui,sans-serif;max-width:1200px;margin:2em auto;padding:0 1em;color:#222}\
              h1{font-size:1.6em}h2{border-bottom:1px solid #ccc;padding-bottom:.2em;margin-top:1.6em}\
              table{border-collapse:collapse;margin:.5em 0}td,th{border:1px solid #ccc;padding:.25em .6em;text-align:left}\
              td.pass{background:#e6f4ea}td.fail{background:#fde8e8}.verdict{font-size:1.2em;padding:.6em 1em;border-radius:6px}\
-             .ok{background:#e6f4ea}.no{background:#fde8e8}figure{margin:1em 0}img{max-width:100%;border:1px solid #ddd}\
-             figcaption{color:#555;font-size:.9em}table.kv th{background:#f6f6f6;font-weight:normal}</style></head><body>",
+             .ok{background:#e6f4ea}.no{background:#fde8e8}figure{margin:1em 0}figure svg{max-width:100%;height:auto;border:1px solid #ddd}\
+             figcaption{color:#555;font-size:.9em}td.unchecked{color:#666;background:#f3f3f3}code{font-size:.92em;background:#f3f3f3;padding:0 .2em;border-radius:3px}table.kv th{background:#f6f6f6;font-weight:normal}</style></head><body>",
         );
-        h.push_str(&format!("<h1>brdfmill report — {}</h1>", esc(&self.title)));
+        h.push_str(&format!("<h1>brdfmill report — {}</h1>", rich(&self.title)));
+        // top-down: the verdict and why, then what to do (the setup sheet), then the evidence
         match self.verdict {
-            Verdict::Single(m) => single(&mut h, m),
-            Verdict::Regions(m) => regions(&mut h, m),
+            Verdict::Single(m) => single_verdict(&mut h, m),
+            Verdict::Regions(m) => regions_verdict(&mut h, m),
         }
-        // the setup sheet before the evidence: what a machinist reads first
         h.push_str("<h2>To mill this</h2>");
         h.push_str(&kv_table(&self.program));
+        match self.verdict {
+            Verdict::Single(m) => single_metrics(&mut h, m),
+            Verdict::Regions(m) => regions_metrics(&mut h, m),
+        }
         for f in &self.figures {
             h.push_str(&format!(
-                "<h2>{}</h2><figure><img alt=\"{}\" src=\"data:image/png;base64,{}\"><figcaption>{}</figcaption></figure>",
-                esc(&f.title),
-                esc(&f.title),
-                b64.encode(&f.png),
-                esc(&f.caption)
+                "<h2>{}</h2><figure>{}<figcaption>{}</figcaption></figure>",
+                rich(&f.title),
+                f.svg,
+                rich(&f.caption)
             ));
             for d in &f.label_defects {
                 h.push_str(&format!("<p class=\"label-defect\">Figure defect: {}</p>", esc(d)));
@@ -166,33 +201,37 @@ fn notes(h: &mut String, notes: &[String]) {
     if !notes.is_empty() {
         h.push_str("<h2>Why</h2><ul>");
         for n in notes {
-            h.push_str(&format!("<li>{}</li>", esc(n)));
+            h.push_str(&format!("<li>{}</li>", rich(n)));
         }
         h.push_str("</ul>");
     }
 }
 
-/// Verdict, reasons and metrics of a single target.
-fn single(h: &mut String, m: &Metrics) {
+/// Verdict and reasons of a single target.
+fn single_verdict(h: &mut String, m: &Metrics) {
     h.push_str(&format!(
         "<p class=\"verdict {}\">{}</p>",
         if m.pass { "ok" } else { "no" },
-        if m.pass {
+        rich(&if m.pass {
             "The simulated milled surface meets every tolerance against the target.".to_string()
         } else {
             format!(
                 "The simulated milled surface falls short: {}.",
                 failed(&m.milled.checks).join("; ")
             )
-        }
+        })
     ));
     notes(h, &m.notes);
-    h.push_str(&format!("<h2>Metrics</h2><p>Reference: {}.</p>", esc(&m.reference)));
+}
+
+/// Metrics of a single target, and what the machine does to them.
+fn single_metrics(h: &mut String, m: &Metrics) {
+    h.push_str(&format!("<h2>Metrics</h2><p>Reference: {}.</p>", rich(&m.reference)));
     let ideal = m.milled_ideal.as_ref().filter(|_| m.accuracy.is_some());
     if let Some(a) = &m.accuracy {
         h.push_str(&format!(
             "<p>The milled column is the cut on the declared machine ({}); the last column is the same program on a perfect machine.</p>",
-            esc(&a.describe())
+            rich(&a.describe())
         ));
     }
     h.push_str(&metrics_table(&m.design, &m.milled, ideal));
@@ -211,7 +250,7 @@ fn machine_effects(h: &mut String, m: &Metrics) {
     let row = |h: &mut String, name: &str, c: [f64; 2], l1: f64, corr: f64| {
         h.push_str(&format!(
             "<tr><td>{}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td><td>{:.3}</td></tr>",
-            esc(name),
+            rich(name),
             c[0],
             c[1],
             l1,
@@ -237,8 +276,8 @@ fn machine_effects(h: &mut String, m: &Metrics) {
     h.push_str("</table>");
 }
 
-/// Verdict, reasons and per-region metrics of a spatially varying target.
-fn regions(h: &mut String, m: &super::RegionsMetrics) {
+/// Verdict and reasons of a spatially varying target.
+fn regions_verdict(h: &mut String, m: &super::RegionsMetrics) {
     let short: Vec<String> = m
         .regions
         .iter()
@@ -248,7 +287,7 @@ fn regions(h: &mut String, m: &super::RegionsMetrics) {
     h.push_str(&format!(
         "<p class=\"verdict {}\">{}</p>",
         if m.pass { "ok" } else { "no" },
-        if m.pass {
+        rich(&if m.pass {
             format!(
                 "Every region of the simulated milled part ({}) meets every tolerance against its own target.",
                 m.regions
@@ -259,9 +298,13 @@ fn regions(h: &mut String, m: &super::RegionsMetrics) {
             )
         } else {
             format!("The simulated milled part falls short: {}.", short.join("; "))
-        }
+        })
     ));
     notes(h, &m.notes);
+}
+
+/// The regions and each one's metrics.
+fn regions_metrics(h: &mut String, m: &super::RegionsMetrics) {
     h.push_str("<h2>Regions</h2><table class=\"metrics\"><tr><th>region</th><th>colour</th><th>target</th><th>share</th><th>border</th><th>measured</th></tr>");
     for r in &m.regions {
         h.push_str(&format!(
@@ -279,7 +322,7 @@ fn regions(h: &mut String, m: &super::RegionsMetrics) {
     h.push_str("</table>");
     for r in &m.regions {
         h.push_str(&format!(
-            "<h2>Metrics: region `{}`</h2><p>Reference: the observed half-angle distribution of `{}`; the design is its own tile's facets convolved with the base lobe, the milled figures come from the region's cells away from its border.</p>",
+            "<h2>Metrics: region <code>{}</code></h2><p>Reference: the observed half-angle distribution of <code>{}</code>; the design is its own tile's facets convolved with the base lobe, the milled figures come from the region's cells away from its border.</p>",
             esc(&r.name),
             esc(&r.target)
         ));

@@ -421,13 +421,15 @@ fn convergence(
             .map(|r| (r.round as f64, pct(r.cov_ratio[k])))
             .collect::<Vec<_>>()
     };
-    let band = |v: f64| vec![(0.8, pct(v)), (n + 0.2, pct(v))];
+    // half a round of room each side, so the chosen round's marks stay short beside the band even when
+    // there is one round
+    let band = |v: f64| vec![(0.5, pct(v)), (n + 0.5, pct(v))];
     let chosen = rounds
         .iter()
         .min_by(|a, b| a.score.total_cmp(&b.score))
         .map(|r| r.round as f64)
         .unwrap_or(1.0);
-    let mark = |v: f64| vec![(chosen - 0.15, pct(v)), (chosen + 0.15, pct(v))];
+    let mark = |v: f64| vec![(chosen - 0.12, pct(v)), (chosen + 0.12, pct(v))];
     let plot = LinePlot {
         title: "design rounds: variance off the target (%)".into(),
         x_label: "round".into(),
@@ -549,10 +551,18 @@ fn figures(
         Figure::new(
             "Wave optics of the milled surface",
             format!(
-                "Kirchhoff BRDF (FFT, λ = {} µm, Gaussian coherence σ = {} µm, 3×3 windows) of a {} mm patch of the simulated surface at normal incidence, beside the geometric microfacet BRDF of the same patch, on one colour scale (four decades below the larger peak), within the disc of real outgoing directions (grey beyond). Wave albedo {wave_albedo:.3}. Scallop stepover {:.1} µm: {}",
+                "Kirchhoff BRDF (FFT, λ = {} µm, Gaussian coherence σ = {} µm, 3×3 windows) of a {} mm patch at the centre of the simulated surface at normal incidence, beside the geometric microfacet BRDF of the same patch, on one colour scale (four decades below the larger peak), within the disc of real outgoing directions (grey beyond). {}Wave albedo {wave_albedo:.3}. Scallop stepover {:.1} µm: {}",
                 cfg.wavelength_um,
                 cfg.coherence_sigma_um,
                 cfg.wave_patch_mm,
+                if cfg.wave_patch_mm < 2.0 * input.tile.config.facet_mm {
+                    format!(
+                        "The patch is smaller than two of the tile's {} mm facets: it shows the lobe of the facets under it and their scallops (what diffraction does), not the tile's BRDF, which the BRDF slices above show. ",
+                        input.tile.config.facet_mm
+                    )
+                } else {
+                    String::new()
+                },
                 input.stepover_mm * 1000.0,
                 if diffracts { "its diffraction orders fall inside the lobe (see Why)." } else { "no resolved diffraction orders inside the lobe." }
             ),

@@ -1,210 +1,12 @@
-//! Figures as PNG: false-colour maps with axes, ticks, a colour bar and a title.
+//! Figures: false-colour maps with axes, ticks, a colour bar and a title ([`Heatmap`]), and line charts
+//! ([`LinePlot`]), drawn on a [`Canvas`] that gives both an SVG (text as text, for the report) and a PNG.
 //!
-//! Pixels are drawn into a [`Canvas`]; text and lines come from `embedded-graphics` (its built-in bitmap
-//! fonts need no font files on the user's machine); colour maps from `colorous`; PNG encoding from `png`.
+//! Colour maps come from `colorous`.
 
-use embedded_graphics::{
-    mono_font::{iso_8859_1::FONT_6X10, iso_8859_7::FONT_6X10 as GREEK_6X10, MonoTextStyle},
-    pixelcolor::Rgb888,
-    prelude::*,
-    primitives::{Line, PrimitiveStyle, Rectangle},
-    text::{Alignment, Text},
-};
-use std::path::Path;
+mod canvas;
 
-/// Greek letters, which the ISO 8859-7 font draws.
-fn is_greek(c: char) -> bool {
-    ('\u{0391}'..='\u{03C9}').contains(&c)
-}
-
-/// Text as the bitmap fonts can draw it: Latin-1 and Greek letters as they are, the mathematical signs of
-/// the figures' titles spelt in ASCII (`−` → `-`, `⊛` → `*`, `≤` → `<=`, …), anything else as `?`.
-#[must_use]
-pub fn glyph_text(s: &str) -> String {
-    let mut out = String::with_capacity(s.len());
-    for c in s.chars() {
-        match c {
-            c if u32::from(c) <= 0xFF || is_greek(c) => out.push(c),
-            '−' | '–' | '—' => out.push('-'),
-            '⊛' | '∗' | '⋆' => out.push('*'),
-            '≤' => out.push_str("<="),
-            '≥' => out.push_str(">="),
-            '≈' | '∼' => out.push('~'),
-            '→' => out.push_str("->"),
-            '←' => out.push_str("<-"),
-            '…' => out.push_str("..."),
-            '‘' | '’' | '′' => out.push('\''),
-            '“' | '”' | '″' => out.push('"'),
-            '∞' => out.push_str("inf"),
-            '√' => out.push_str("sqrt"),
-            _ => out.push('?'),
-        }
-    }
-    out
-}
-
-/// An RGB image being drawn.
-#[derive(Clone, Debug)]
-pub struct Canvas {
-    /// Width in pixels.
-    pub width: u32,
-    /// Height in pixels.
-    pub height: u32,
-    /// Row-major RGB pixels, top row first.
-    pub pixels: Vec<[u8; 3]>,
-    /// Labels that could not be drawn as given: a character with no glyph (drawn as `?`) or text wider than
-    /// the canvas (cut at its edges). Kept so that a report can say so and a test can fail on it.
-    pub label_defects: Vec<String>,
-}
-
-impl OriginDimensions for Canvas {
-    fn size(&self) -> Size {
-        Size::new(self.width, self.height)
-    }
-}
-
-impl DrawTarget for Canvas {
-    type Color = Rgb888;
-    type Error = std::convert::Infallible;
-
-    fn draw_iter<I>(&mut self, pixels: I) -> Result<(), Self::Error>
-    where
-        I: IntoIterator<Item = Pixel<Self::Color>>,
-    {
-        for Pixel(p, c) in pixels {
-            if p.x >= 0 && p.y >= 0 && (p.x as u32) < self.width && (p.y as u32) < self.height {
-                self.pixels[p.y as usize * self.width as usize + p.x as usize] = [c.r(), c.g(), c.b()];
-            }
-        }
-        Ok(())
-    }
-}
-
-const BLACK: Rgb888 = Rgb888::new(0, 0, 0);
-
-impl Canvas {
-    /// A white canvas.
-    pub fn new(width: u32, height: u32) -> Self {
-        Self {
-            width,
-            height,
-            pixels: vec![[255, 255, 255]; (width * height) as usize],
-            label_defects: vec![],
-        }
-    }
-
-    /// Set one pixel (ignored outside the canvas).
-    #[inline]
-    pub fn put(&mut self, x: i64, y: i64, c: [u8; 3]) {
-        if x >= 0 && y >= 0 && (x as u32) < self.width && (y as u32) < self.height {
-            self.pixels[y as usize * self.width as usize + x as usize] = c;
-        }
-    }
-
-    /// Draw text with its anchor at `(x, y)` (baseline), aligned left, centre or right. Latin-1 characters
-    /// come from the ISO 8859-1 bitmap font, Greek letters from its ISO 8859-7 sibling (the same 6×10 cell),
-    /// and the few mathematical signs neither has are spelt in ASCII ([`glyph_text`]). Text that would run
-    /// past the left or right edge is moved inside; text wider than the canvas, or with a character neither
-    /// font has, is drawn as well as it can be and recorded in [`Canvas::label_defects`].
-    pub fn text(&mut self, x: i32, y: i32, s: &str, align: Alignment) {
-        let drawn = glyph_text(s);
-        let missing = drawn.matches('?').count() > s.matches('?').count();
-        let n = drawn.chars().count() as i32;
-        let w = FONT_6X10.character_size.width as i32;
-        let width = n * w;
-        let left = match align {
-            Alignment::Left => x,
-            Alignment::Center => x - width / 2,
-            Alignment::Right => x - width,
-        };
-        let left = left.min(self.width as i32 - width).max(0);
-        if missing {
-            self.label_defects.push(format!("missing glyph in {s:?}"));
-        }
-        let top = y - FONT_6X10.baseline as i32;
-        let h = FONT_6X10.character_size.height as i32;
-        if left + width > self.width as i32 || top < 0 || top + h > self.height as i32 {
-            self.label_defects.push(format!("clipped label {s:?}"));
-        }
-        let latin = MonoTextStyle::new(&FONT_6X10, BLACK);
-        let greek = MonoTextStyle::new(&GREEK_6X10, BLACK);
-        let mut buf = [0u8; 4];
-        for (k, c) in drawn.chars().enumerate() {
-            let x = left + k as i32 * w;
-            if c == '.' {
-                // the font's full stop is a diamond reaching below the baseline, which reads as a comma in
-                // tick labels ("2,5"): a 2×2 dot standing on the baseline instead
-                for (dx, dy) in [(2, -1), (3, -1), (2, 0), (3, 0)] {
-                    self.put(i64::from(x + dx), i64::from(y + dy), [0, 0, 0]);
-                }
-                continue;
-            }
-            let style = if is_greek(c) { greek } else { latin };
-            let p = Point::new(x, y);
-            Text::with_alignment(c.encode_utf8(&mut buf), p, style, Alignment::Left)
-                .draw(self)
-                .ok();
-        }
-    }
-
-    /// A one-pixel black line.
-    pub fn line(&mut self, x0: i32, y0: i32, x1: i32, y1: i32) {
-        Line::new(Point::new(x0, y0), Point::new(x1, y1))
-            .into_styled(PrimitiveStyle::with_stroke(BLACK, 1))
-            .draw(self)
-            .ok();
-    }
-
-    /// A one-pixel black rectangle outline.
-    pub fn frame(&mut self, x: i32, y: i32, w: u32, h: u32) {
-        Rectangle::new(Point::new(x, y), Size::new(w, h))
-            .into_styled(PrimitiveStyle::with_stroke(BLACK, 1))
-            .draw(self)
-            .ok();
-    }
-
-    /// Copy another canvas in with its top-left corner at `(x, y)`.
-    pub fn blit(&mut self, other: &Canvas, x: i64, y: i64) {
-        self.label_defects.extend(other.label_defects.iter().cloned());
-        for j in 0..other.height as i64 {
-            for i in 0..other.width as i64 {
-                self.put(x + i, y + j, other.pixels[(j * other.width as i64 + i) as usize]);
-            }
-        }
-    }
-
-    /// Panels side by side, top-aligned, on a white canvas as tall as the tallest.
-    pub fn hstack(panels: &[Canvas]) -> Canvas {
-        let w = panels.iter().map(|p| p.width).sum();
-        let h = panels.iter().map(|p| p.height).max().unwrap_or(0);
-        let mut cv = Canvas::new(w, h);
-        let mut x = 0i64;
-        for p in panels {
-            cv.blit(p, x, 0);
-            x += p.width as i64;
-        }
-        cv
-    }
-
-    /// Encode as PNG bytes.
-    pub fn to_png(&self) -> Vec<u8> {
-        let mut out = Vec::new();
-        {
-            let mut enc = png::Encoder::new(&mut out, self.width, self.height);
-            enc.set_color(png::ColorType::Rgb);
-            enc.set_depth(png::BitDepth::Eight);
-            let mut w = enc.write_header().expect("PNG header to memory");
-            let flat: Vec<u8> = self.pixels.iter().flatten().copied().collect();
-            w.write_image_data(&flat).expect("PNG data to memory");
-        }
-        out
-    }
-
-    /// Write as a PNG file, atomically.
-    pub fn save_png(&self, path: &Path) -> Result<(), crate::base::io::WriteError> {
-        crate::base::io::write_atomic(path, &self.to_png())
-    }
-}
+pub use canvas::{glyph_text, Canvas, Mark, CHAR_PX, DASH_PX};
+pub use embedded_graphics::text::Alignment;
 
 /// How values map to colour.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -391,6 +193,7 @@ impl Heatmap<'_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use embedded_graphics::mono_font::{iso_8859_1::FONT_6X10, iso_8859_7::FONT_6X10 as GREEK_6X10};
 
     #[test]
     fn every_title_sign_has_a_glyph() {
@@ -418,6 +221,7 @@ mod tests {
         let ink_rows = |s: &str| {
             let mut c = Canvas::new(12, 16);
             c.text(0, 10, s, Alignment::Left);
+            let c = c.rasterized();
             (0..16usize)
                 .filter(|&y| (0..12usize).any(|x| c.pixels[y * 12 + x][0] < 128))
                 .collect::<Vec<_>>()
@@ -457,7 +261,7 @@ mod tests {
         };
         let cv = h.render();
         assert!(cv.label_defects.is_empty(), "{:?}", cv.label_defects);
-        assert_eq!(dark_border_pixels(&cv), 0);
+        assert_eq!(dark_border_pixels(&cv.rasterized()), 0);
         // text wider than the canvas, and a sign neither font has, are recorded
         let mut small = Canvas::new(40, 20);
         small.text(0, 12, "far too long for forty pixels", Alignment::Left);
@@ -491,7 +295,7 @@ mod tests {
             log_y: false,
             whole_x: false,
         };
-        let cv = plot.render();
+        let cv = plot.render().rasterized();
         assert!(cv.label_defects.is_empty(), "{:?}", cv.label_defects);
         // the plot area (x 70..270, y 28..128) holds only the curves: the legend is below y 128 + 44
         let ink = |y0: usize, y1: usize| {
@@ -514,6 +318,62 @@ mod tests {
             .collect();
         let on = dashed.iter().filter(|&&d| d).count() as f64 / dashed.len() as f64;
         assert!((0.5..0.7).contains(&on), "dashed line inks {on} of its length");
+    }
+
+    /// The SVG carries every label as a text element (escaped, in the font the page chooses), every line as
+    /// a path, and the raster only when there is one; the PNG draws the same marks in.
+    #[test]
+    fn svg_keeps_text_as_text() {
+        let plot = LinePlot {
+            title: "variance & <ratio>".into(),
+            x_label: "round".into(),
+            y_label: "σ² ratio".into(),
+            series: vec![Series {
+                label: "x".into(),
+                points: vec![(1.0, 0.9), (2.0, 1.0), (3.0, f64::NAN), (4.0, 1.1), (5.0, 1.0)],
+                color: PALETTE[0],
+                dashed: true,
+            }],
+            size_px: (200, 100),
+            log_y: false,
+            whole_x: true,
+        };
+        let cv = plot.render();
+        let svg = cv.to_svg();
+        assert!(svg.starts_with("<svg ") && svg.ends_with("</svg>"));
+        assert!(svg.contains(">variance &amp; &lt;ratio&gt;</text>"), "{svg}");
+        assert!(svg.contains(">σ² ratio</text>"));
+        // a line chart has no raster, and its NaN splits the series in two dashed paths
+        assert!(!svg.contains("<image"));
+        assert_eq!(
+            svg.matches("stroke-dasharray").count(),
+            3,
+            "two runs and the legend's sample"
+        );
+        let texts = cv.marks.iter().filter(|m| matches!(m, Mark::Text { .. })).count();
+        assert_eq!(svg.matches("<text ").count(), texts);
+        // the PNG has the marks drawn in: ink where the raster layer is white
+        let ink = |c: &Canvas| c.pixels.iter().filter(|p| **p != [255, 255, 255]).count();
+        assert_eq!(ink(&cv), 0);
+        assert!(ink(&cv.rasterized()) > 500);
+        // a map keeps its pixels as one embedded PNG
+        let v: Vec<f64> = (0..16).map(f64::from).collect();
+        let h = Heatmap {
+            values: &v,
+            nx: 4,
+            ny: 4,
+            x_range: (0.0, 1.0),
+            y_range: (0.0, 1.0),
+            title: "t".into(),
+            x_label: "x".into(),
+            y_label: "y".into(),
+            value_label: "v".into(),
+            scale: Scale::Linear,
+            value_max: None,
+            plot_px: 40,
+            rgb: None,
+        };
+        assert_eq!(h.render().to_svg().matches("<image ").count(), 1);
     }
 
     #[test]
@@ -676,35 +536,35 @@ impl LinePlot {
         cv.text(4, top - 8, &self.y_label, Alignment::Left);
         cv.text(left + pw / 2, 14, &self.title, Alignment::Center);
         for s in &self.series {
-            let mut prev: Option<(i32, i32)> = None;
-            let mut phase = 0.0;
-            let mut drawn = vec![];
+            // one path per run of finite points; a gap (a value the axis cannot show) breaks the line
+            let mut runs: Vec<Vec<(i32, i32)>> = vec![vec![]];
             for p in &s.points {
                 let y = ty(p.1);
-                if !y.is_finite() {
-                    prev = None;
-                    continue;
+                if y.is_finite() {
+                    runs.last_mut()
+                        .expect("one run at least")
+                        .push((px(p.0), py(y.clamp(y0, y1))));
+                } else if !runs.last().expect("one run at least").is_empty() {
+                    runs.push(vec![]);
                 }
-                let cur = (px(p.0), py(y.clamp(y0, y1)));
-                if let Some(a) = prev {
-                    phase = draw_series_line(&mut cv, a, cur, s.color, s.dashed, phase);
-                }
-                prev = Some(cur);
-                drawn.push(cur);
             }
-            // a series of one point has no segment: mark the point itself
-            if let [(x, y)] = drawn[..] {
-                for dy in -2..=2 {
-                    for dx in -2..=2 {
-                        cv.put((x + dx) as i64, (y + dy) as i64, s.color);
+            let single = runs.iter().map(Vec::len).sum::<usize>() == 1;
+            for run in runs {
+                // a series of one point has no segment: mark the point itself
+                if let (true, [(x, y)]) = (single, &run[..]) {
+                    for dy in -2..=2 {
+                        for dx in -2..=2 {
+                            cv.put(i64::from(x + dx), i64::from(y + dy), s.color);
+                        }
                     }
                 }
+                cv.path(run, s.color, 2, s.dashed);
             }
         }
         for (s, row, x) in legend {
             let ly = top + ph + 48 + 14 * row;
             let x = 4 + x;
-            draw_series_line(&mut cv, (x, ly - 3), (x + 20, ly - 3), s.color, s.dashed, 0.0);
+            cv.path(vec![(x, ly - 3), (x + 20, ly - 3)], s.color, 2, s.dashed);
             cv.text(x + 25, ly, &s.label, Alignment::Left);
         }
         cv
@@ -714,7 +574,7 @@ impl LinePlot {
 /// Where each labelled series' legend entry goes: `(series, row, x offset in pixels)`, entries left to right
 /// in rows no wider than `width` (a series without a label continues the one before it and has no entry).
 fn legend_layout(series: &[Series], width: i32) -> Vec<(&Series, i32, i32)> {
-    let cell = FONT_6X10.character_size.width as i32;
+    let cell = CHAR_PX;
     let (mut row, mut x) = (0, 0);
     let mut out = vec![];
     for s in series.iter().filter(|s| !s.label.is_empty()) {
@@ -727,44 +587,4 @@ fn legend_layout(series: &[Series], width: i32) -> Vec<(&Series, i32, i32)> {
         x += w;
     }
     out
-}
-
-/// Dashes of a dashed series, pixels on and off.
-const DASH_PX: (f64, f64) = (6.0, 4.0);
-
-/// A segment of a series, solid or dashed; dashes continue across segments from `phase` (pixels into the
-/// dash pattern), and the phase at the segment's end is returned.
-fn draw_series_line(cv: &mut Canvas, a: (i32, i32), b: (i32, i32), c: [u8; 3], dashed: bool, phase: f64) -> f64 {
-    if !dashed {
-        draw_line_color(cv, a, b, c);
-        return 0.0;
-    }
-    let (dx, dy) = ((b.0 - a.0) as f64, (b.1 - a.1) as f64);
-    let len = dx.hypot(dy);
-    let period = DASH_PX.0 + DASH_PX.1;
-    let at = |t: f64| {
-        let f = if len > 0.0 { t / len } else { 0.0 };
-        (
-            (a.0 as f64 + f * dx).round() as i32,
-            (a.1 as f64 + f * dy).round() as i32,
-        )
-    };
-    // walk the pattern: dash starts at multiples of the period, shifted by the phase
-    let mut t = -(phase % period);
-    while t < len {
-        // a line's end pixels are both inked: a dash of n pixels runs from its first to its n-th
-        let (on0, on1) = (t.max(0.0), (t + DASH_PX.0 - 1.0).min(len));
-        if on1 >= on0 {
-            draw_line_color(cv, at(on0), at(on1), c);
-        }
-        t += period;
-    }
-    (phase + len) % period
-}
-
-fn draw_line_color(cv: &mut Canvas, a: (i32, i32), b: (i32, i32), c: [u8; 3]) {
-    Line::new(Point::new(a.0, a.1), Point::new(b.0, b.1))
-        .into_styled(PrimitiveStyle::with_stroke(Rgb888::new(c[0], c[1], c[2]), 2))
-        .draw(cv)
-        .ok();
 }
