@@ -165,7 +165,10 @@ mod tests {
         write_f32_2d(&p, 4, 3, &data).unwrap();
         let bytes = std::fs::read(&p).unwrap();
         let header = String::from_utf8_lossy(&bytes[10..80]);
-        assert!(header.contains("'<f4'") && header.contains("'shape': (4, 3"), "{header}");
+        assert!(
+            header.contains("'<f4'") && header.contains("'shape': (4, 3"),
+            "{header}"
+        );
         assert_eq!(bytes.len(), 128 + 12 * 4);
         let (rows, cols, back) = read_f64_2d(&p).unwrap();
         assert_eq!((rows, cols), (4, 3));

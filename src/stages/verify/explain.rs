@@ -30,6 +30,10 @@ pub struct Findings<'a> {
     /// How far the target's observed distribution stays above half its peak across the finishing passes
     /// (the mean of both sides), in slope units ([`half_max_extent`]).
     pub target_peak_halfwidth: f64,
+    /// The same extent of the job's polish lobe alone (`target.polish`; 0 without one), slope units.
+    pub polish_halfwidth: f64,
+    /// The target's spec (`beckmann:alpha=0.2,…`): which model's normalisation an albedo note may blame.
+    pub target_spec: &'a str,
 }
 
 /// How far from its peak a density stays above half the peak along the direction `(dp, dq)` (unit), the
@@ -86,15 +90,33 @@ pub fn shortfall(f: &Findings) -> Vec<String> {
     let (r, s) = (f.tool_radius_mm, f.stepover_mm);
     let t_max = 0.5 * s / (r * r - 0.25 * s * s).max(1e-12).sqrt();
     let t_peak = f.target_peak_halfwidth;
-    if (milled.ndf_corr < tol.ndf_corr_min || milled.ndf_l1 > tol.ndf_l1_max) && t_peak > 0.0 && t_max > t_peak {
-        // the scallop height whose lobe spans ±t_peak: s/2 = r·t/√(1 + t²), h = r − √(r² − s²/4)
-        let half_s = r * t_peak / (1.0 + t_peak * t_peak).sqrt();
+    let t_polish = f.polish_halfwidth;
+    let shape_short = milled.ndf_corr < tol.ndf_corr_min || milled.ndf_l1 > tol.ndf_l1_max;
+    if shape_short && t_peak > 0.0 && t_polish >= t_peak {
+        // the polish lobe alone is as wide as the target's peak: no scallop height can help, and the note
+        // says so rather than suggest one
+        notes.push(format!(
+            "The target's peak is sharper than the job's polish lobe: across the passes the target stays above half its maximum within ±{:.1}°, the polish lobe alone (`target.polish`, the finish the cut leaves on each facet) within ±{:.1}°, so the milled lobe cannot be narrower than the polish whatever the scallop (now ±{:.1}°). The dominant cause is the polish: a finer one (a smaller α in `target.polish`, if the stock takes that finish) is the next step, not a smaller scallop.",
+            t_peak.atan().to_degrees(),
+            t_polish.atan().to_degrees(),
+            t_max.atan().to_degrees()
+        ));
+    } else if shape_short && t_peak > 0.0 && t_max > t_peak {
+        // the scallops' share of the peak's width: half-widths add about in quadrature with the polish's
+        let t_scallop = (t_peak * t_peak - t_polish * t_polish).sqrt();
+        // the scallop height whose lobe spans ±t_scallop: s/2 = r·t/√(1 + t²), h = r − √(r² − s²/4)
+        let half_s = r * t_scallop / (1.0 + t_scallop * t_scallop).sqrt();
         let h_um = 1000.0 * (r - (r * r - half_s * half_s).sqrt());
         notes.push(format!(
-            "The target's peak is sharper than the scallops' lobe: across the passes it stays above half its maximum within ±{:.1}°, while the scallops (stepover {:.4} mm) spread the milled slopes over ±{:.1}°; a scallop height of about {:.2} µm (`toolpath.scallop_um`) would narrow the lobe to the peak.",
+            "The target's peak is sharper than the scallops' lobe: across the passes it stays above half its maximum within ±{:.1}°, while the scallops (stepover {:.1} µm) spread the milled slopes over ±{:.1}°{}; a scallop height of about {:.2} µm (`toolpath.scallop_um`) would narrow the lobe to the peak (estimated from the lobes' widths, not re-run).",
             t_peak.atan().to_degrees(),
-            s,
+            s * 1e3,
             t_max.atan().to_degrees(),
+            if t_polish > 0.0 {
+                format!(" and the polish lobe over ±{:.1}°", t_polish.atan().to_degrees())
+            } else {
+                String::new()
+            },
             h_um
         ));
     }
@@ -171,8 +193,9 @@ pub fn shortfall(f: &Findings) -> Vec<String> {
         .collect();
     if !beyond.is_empty() {
         notes.push(format!(
-            "The target's own albedo is not what any surface of its material with its slopes reflects: {} for a perfect cut. No geometry can change that: it comes from the target model's normalisation (Ward's falls as cosθi) or from a diffuse or absorbing part. The albedo checks compare the milled surface with the perfect cut.",
-            beyond.join(", ")
+            "The target's own albedo is not what any surface of its material with its slopes reflects: {} for a perfect cut. No geometry can change that: {}. The albedo checks compare the milled surface with the perfect cut.",
+            beyond.join(", "),
+            target_albedo_cause(f.target_spec)
         ));
     }
     if f.deviation.unreachable_fraction > 0.001 {
@@ -191,9 +214,39 @@ pub fn shortfall(f: &Findings) -> Vec<String> {
     notes
 }
 
+/// Why a target's albedo differs from a perfect cut's, by its model: Ward's normalisation falls as cosθi;
+/// a measured target carries its material's diffuse or absorbed part; an analytic microfacet model with
+/// Smith masking differs from the facets' own masking at grazing angles.
+fn target_albedo_cause(spec: &str) -> &'static str {
+    let model = spec.split([':', ',']).next().unwrap_or("").trim();
+    match model {
+        "ward" => "Ward's normalisation makes its albedo fall as cosθi",
+        "merl" | "rgl" => "the measured material reflects a diffuse part and absorbs some light, which facets of one metal do not",
+        "beckmann" | "ggx" => "the model's Smith masking of an unbounded slope distribution differs from what facets cut within the machinable cone shadow and mask, most at grazing incidence",
+        _ => "the target model's normalisation or a diffuse or absorbing part differs from a surface of facets",
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::half_max_extent;
+
+    /// Ward's normalisation is named only for a Ward target (it was blamed on vinyl and GGX targets).
+    #[test]
+    fn the_albedo_note_names_the_targets_own_model() {
+        use super::target_albedo_cause as cause;
+        assert!(cause("ward:ax=0.1,ay=0.3,material=aluminium").contains("Ward"));
+        for other in [
+            "ggx:alpha=0.8",
+            "rgl:vinyl.bsdf",
+            "merl:gold.binary",
+            "beckmann:alpha=0.2",
+            "phong:n=10",
+        ] {
+            assert!(!cause(other).contains("Ward"), "{other}: {}", cause(other));
+        }
+        assert!(cause("rgl:paper.bsdf").contains("diffuse"));
+    }
     use crate::base::slope::{SlopeDomain, SlopeGrid};
 
     /// A Gaussian `exp(−t²/2σ²)` falls to half its peak at `σ√(2 ln 2)`, along each axis.

@@ -191,6 +191,11 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         None => milled_m.clone(),
     };
     let facets = input.tile.config.facets_x * input.tile.config.facets_y;
+    // across the finishing passes, where the scallops spread the slopes
+    let across = {
+        let a = (input.raster_angle_deg + 90.0).to_radians();
+        (a.cos(), a.sin())
+    };
     let mut notes = explain::shortfall(&explain::Findings {
         milled: &milled_m,
         design: &design_m,
@@ -210,9 +215,14 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         target_peak_halfwidth: if highlight.is_some() {
             0.0
         } else {
-            let across = (input.raster_angle_deg + 90.0).to_radians();
-            explain::half_max_extent(&n.observed, (across.cos(), across.sin()))
+            explain::half_max_extent(&n.observed, across)
         },
+        polish_halfwidth: input.polish.map_or(0.0, |b| {
+            let (lobe, _) =
+                crate::stages::ndf::halfangle::half_angle_density(b, n.observed.domain, &input.ndf_config.half_angle);
+            explain::half_max_extent(&lobe, across)
+        }),
+        target_spec: &input.target.spec,
     });
     if let Some(h) = highlight
         .as_ref()
@@ -230,9 +240,18 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
     }
     if input.tile.sampling.steep_mass > 1e-4 {
         notes.push(format!(
-            "{:.2}% of the target NDF's mass lies beyond the machinable limit of {}° and was dropped from the facets.",
+            "{:.2}% of the target NDF's mass lies beyond the machinable limit of {}° and was dropped from the facets{}",
             input.tile.sampling.steep_mass * 100.0,
-            input.tile.config.max_slope_deg
+            input.tile.config.max_slope_deg,
+            if input.tile.sampling.steep_mass > 0.01 {
+                // the limit is the steepest facet the relief budget allows: atan(relief / (√2·facet))
+                format!(
+                    ": the milled lobe lacks that tail. The limit is `facets.max_slope_deg` (unless the job sets it, the steepest {} mm facet the relief budget allows); smaller facets (`facets.facet_mm`) or a taller budget (a tool with longer flutes, or `facets.max_relief_mm`) raise it, up to the NDF grid's edge (`ndf.max_angle_deg`) and what the ball can reach.",
+                    input.tile.config.facet_mm
+                )
+            } else {
+                ".".to_string()
+            }
         ));
     }
     if !measurement.window.whole() {
