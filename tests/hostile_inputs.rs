@@ -283,10 +283,10 @@ fn rgl_files_that_would_be_misread_are_refused() {
 }
 
 #[test]
-fn a_float32_npy_names_its_path_once() {
+fn an_integer_npy_names_its_path_once() {
     let dir = tempfile::tempdir().unwrap();
-    let p = dir.path().join("f32.npy");
-    std::fs::write(&p, npy_bytes("<f4", "(4, 4)", &[0u8; 64])).unwrap();
+    let p = dir.path().join("i32.npy");
+    std::fs::write(&p, npy_bytes("<i4", "(4, 4)", &[0u8; 64])).unwrap();
     let out = dir.path().join("a");
     let o = brdfmill(&[
         "analyze",
@@ -296,9 +296,9 @@ fn a_float32_npy_names_its_path_once() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    refused(&o, &["f32.npy", "float64"], &out);
+    refused(&o, &["i32.npy", "float64 or float32"], &out);
     let err = String::from_utf8_lossy(&o.stderr);
-    assert_eq!(err.matches("f32.npy").count(), 1, "{err}");
+    assert_eq!(err.matches("i32.npy").count(), 1, "{err}");
 }
 
 /// A reader that goes away (`brdfmill run … | head -2`) does not end the run: its progress lines are
