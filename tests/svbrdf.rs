@@ -6,6 +6,7 @@
 #[path = "../examples/make_labels.rs"]
 #[allow(dead_code)]
 mod make_labels;
+mod report_probe;
 
 use brdfmill::job::Job;
 use std::path::{Path, PathBuf};
@@ -254,4 +255,24 @@ fn logo_example_mills_each_region_to_its_own_target() {
             && report.contains("Metrics: region `logo`")
             && report.contains("moving light")
     );
+}
+
+/// The svBRDF report in a real browser (issue 38): as the default job's, read top-down, labels as text
+/// inside their figures, no backtick or Rust name on the page.
+#[test]
+#[ignore = "needs chromium"]
+fn logo_report_renders_in_chromium() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_brdfmill"))
+        .args([
+            "run",
+            root().join("examples/svbrdf-logo.toml").to_str().unwrap(),
+            "--out",
+        ])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(matches!(o.status.code(), Some(0 | 3)), "{o:?}");
+    report_probe::check(&out.join("report.html"), "simulated milled part");
 }
