@@ -181,6 +181,14 @@ pub enum JobError {
         /// What is wrong.
         reason: String,
     },
+    /// A `--set SECTION.KEY=VALUE` override is wrong: the message names the option as typed and the reason.
+    #[error("--set {option}: {reason}")]
+    Override {
+        /// The override as the user typed it.
+        option: String,
+        /// What is wrong.
+        reason: String,
+    },
     /// A stage failed. Its error is in the message and not chained as a source, so that a reader of the
     /// whole chain (`{:#}`) sees it once.
     #[error("{stage}: {error}")]
@@ -285,30 +293,43 @@ impl Job {
             path: path.display().to_string(),
             reason,
         };
-        let (job, given) = Job::parse(path, overrides).map_err(invalid)?;
+        let (job, given) = Job::parse(path, overrides)?;
         let dir = path
             .parent()
             .map(Path::to_path_buf)
             .unwrap_or_else(|| PathBuf::from("."));
-        job.compose(dir, given).map_err(invalid)
+        job.compose(dir, given)
+            .map_err(|reason| invalid(with_overrides_named(reason, overrides)))
     }
 
     /// The job file with the overrides applied, its version checked, and which of the facets' budget keys it
-    /// gives itself (the others are derived from the finishing tool).
-    fn parse(path: &Path, overrides: &[String]) -> Result<(Job, Given), String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read the job file: {e}"))?;
-        let mut raw: toml::Value = toml::from_str(&text).map_err(|e| e.to_string())?;
+    /// gives itself (the others are derived from the finishing tool). An error is the file's (with its line)
+    /// or the override's that brought it in ([`JobError::Override`]).
+    fn parse(path: &Path, overrides: &[String]) -> Result<(Job, Given), JobError> {
+        let invalid = |reason: String| JobError::Invalid {
+            path: path.display().to_string(),
+            reason,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| invalid(format!("cannot read the job file: {e}")))?;
+        let file: toml::Value = toml::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+        // the file alone, then after each override in turn: which one brought an error in
+        let mut stages = vec![file.clone()];
+        let mut raw = file;
         for o in overrides {
-            apply_override(&mut raw, o).map_err(|e| format!("--set {o}: {e}"))?;
+            apply_override(&mut raw, o).map_err(|reason| JobError::Override {
+                option: o.clone(),
+                reason,
+            })?;
+            stages.push(raw.clone());
         }
         match raw.get("version").and_then(|v| v.as_integer()) {
             Some(v) if v == VERSION as i64 => {}
             Some(v) => {
-                return Err(format!(
+                return Err(invalid(format!(
                     "`version` = {v}: this build reads job files of version {VERSION}"
-                ))
+                )))
             }
-            None => return Err(format!("missing `version` (expected version = {VERSION})")),
+            None => return Err(invalid(format!("missing `version` (expected version = {VERSION})"))),
         }
         let facets_key = |k: &str| raw.get("facets").and_then(|f| f.get(k)).is_some();
         let given = Given {
@@ -317,9 +338,17 @@ impl Job {
         };
         let job: Job = if overrides.is_empty() {
             // from the text, so an error names its line and column
-            toml::from_str(&text).map_err(|e| e.to_string())?
+            toml::from_str(&text).map_err(|e: toml::de::Error| invalid(e.to_string()))?
         } else {
-            raw.try_into().map_err(|e: toml::de::Error| e.to_string())?
+            raw.try_into()
+                .map_err(|e: toml::de::Error| match override_at_fault(&stages, overrides) {
+                    Some((k, reason)) => JobError::Override {
+                        option: overrides[k].clone(),
+                        reason,
+                    },
+                    // the file's own error: from its text, with the line
+                    None => invalid(toml::from_str::<Job>(&text).err().unwrap_or(e).to_string()),
+                })?
         };
         Ok((job, given))
     }
@@ -464,6 +493,82 @@ pub fn tool_slope_cap(tool: &crate::cut::machine::Tool, budget_mm: f64, facet_mm
                 tool.id
             ),
         )
+    }
+}
+
+/// Which override brought in the error the job has once every override is applied, and that error;
+/// `None` when it is the file's own. `stages` is the file alone, then the file after each override in turn
+/// (the last one does not read as a job). The override is the last one whose key is where the error is
+/// (the key itself, a table it replaced, or an unknown key it made up); failing that, when the file alone
+/// reads, the override after the last stage that reads.
+fn override_at_fault(stages: &[toml::Value], overrides: &[String]) -> Option<(usize, String)> {
+    let error = |v: &toml::Value| v.clone().try_into::<Job>().err().map(|e| e.to_string());
+    let last = error(stages.last()?)?;
+    let at = error_key(&last);
+    let keyed = overrides.iter().rposition(|o| {
+        let key = o.split_once('=').map_or(o.as_str(), |(k, _)| k).trim();
+        let key: String = key.split('.').map(str::trim).collect::<Vec<_>>().join(".");
+        key == at.key
+            || at.key.starts_with(&format!("{key}."))
+            || (at.unknown && key.starts_with(&format!("{}.", at.key)))
+    });
+    if let Some(k) = keyed {
+        return Some((k, one_line(&last)));
+    }
+    let errors: Vec<Option<String>> = stages.iter().map(error).collect();
+    errors[0].as_ref()?;
+    let k = errors.iter().rposition(Option::is_none)?;
+    Some((k, one_line(errors[k + 1].as_ref()?)))
+}
+
+/// Where a `toml` error (read from a value, so without a line) is: the dotted key it names and whether that
+/// key is unknown (made up, so an override of a key below it made it).
+struct ErrorKey {
+    key: String,
+    unknown: bool,
+}
+
+fn error_key(message: &str) -> ErrorKey {
+    let table = message
+        .rsplit_once("\nin `")
+        .and_then(|(_, rest)| rest.split_once('`'))
+        .map(|(k, _)| k.to_string());
+    let unknown = message
+        .strip_prefix("unknown field `")
+        .and_then(|rest| rest.split_once('`'))
+        .map(|(k, _)| k.to_string());
+    let key = match (table, &unknown) {
+        (Some(t), Some(u)) => format!("{t}.{u}"),
+        (Some(t), None) => t,
+        (None, Some(u)) => u.clone(),
+        (None, None) => String::new(),
+    };
+    ErrorKey {
+        key,
+        unknown: unknown.is_some(),
+    }
+}
+
+/// A message of the `toml` reader on one line (it puts the key path on a line of its own).
+fn one_line(message: &str) -> String {
+    message.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// A refusal that names a key an override set says so: `(`key` from `--set key=value`)`.
+fn with_overrides_named(reason: String, overrides: &[String]) -> String {
+    let named: Vec<String> = overrides
+        .iter()
+        .filter_map(|o| {
+            let key = o.split_once('=')?.0.trim();
+            reason
+                .contains(&format!("`{key}`"))
+                .then(|| format!("`{key}` from `--set {o}`"))
+        })
+        .collect();
+    if named.is_empty() {
+        reason
+    } else {
+        format!("{reason} ({})", named.join("; "))
     }
 }
 

@@ -1,0 +1,143 @@
+//! Messages that name their source (issue 38): an error in a job says where the user put the mistake, the
+//! `--set` option as typed or the file and its line, and names the keys the user set. Each case runs the binary
+//! and is refused while the job loads, before any work.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn brdfmill(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_brdfmill"))
+        .args(args)
+        .output()
+        .expect("run brdfmill")
+}
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// The run was refused (exit 1, nothing written); its message, from stderr.
+fn refusal(o: &Output, out: &Path) -> String {
+    let err = String::from_utf8_lossy(&o.stderr).into_owned();
+    assert_eq!(
+        o.status.code(),
+        Some(1),
+        "expected a refusal, got {:?}: {err}",
+        o.status
+    );
+    assert!(!out.exists(), "a refusal made {}", out.display());
+    err
+}
+
+/// `examples/default.toml` with `edits` (old text → new text) applied, written to `dir/job.toml` with the
+/// machine profile's path made absolute.
+fn job_with(dir: &Path, edits: &[(&str, &str)]) -> (PathBuf, String) {
+    let mut text = std::fs::read_to_string(root().join("examples/default.toml")).unwrap();
+    for (a, b) in edits {
+        assert!(text.contains(a), "{a}");
+        text = text.replacen(a, b, 1);
+    }
+    let text = text.replace("../machines/", &format!("{}/machines/", root().display()));
+    let p = dir.join("job.toml");
+    std::fs::write(&p, &text).unwrap();
+    (p, text)
+}
+
+/// The 1-based line of `text` that contains `needle`.
+fn line_of(text: &str, needle: &str) -> usize {
+    text.lines().position(|l| l.contains(needle)).expect(needle) + 1
+}
+
+/// A typo in `--set` is the option's, not the job file's: the message starts with the option as typed and
+/// names the bad key and the valid ones. The same typo in the file names the file and its line.
+#[test]
+fn a_typo_is_reported_where_the_user_typed_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let (job, _) = job_with(dir.path(), &[]);
+    let typed = "toolpath.scalop_um=1";
+    let o = brdfmill(&[
+        "run",
+        job.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        "facets.seed=2",
+        "--set",
+        typed,
+    ]);
+    let err = refusal(&o, &out);
+    assert!(err.starts_with(&format!("error: --set {typed}: ")), "{err}");
+    assert!(!err.contains("job.toml"), "the job file is not at fault: {err}");
+    assert!(err.contains("unknown field `scalop_um`"), "{err}");
+    assert!(
+        err.contains("`scallop_um`") && err.contains("`feed_mm_min`"),
+        "the valid keys: {err}"
+    );
+    assert!(err.contains("in `toolpath`"), "{err}");
+
+    // a wrong value is the option's too, with its key
+    let typed = "toolpath.scallop_um=abc";
+    let o = brdfmill(&[
+        "run",
+        job.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        typed,
+    ]);
+    let err = refusal(&o, &out);
+    assert!(err.starts_with(&format!("error: --set {typed}: ")), "{err}");
+    assert!(err.contains("`toolpath.scallop_um`"), "{err}");
+
+    // the typo in the file: the file and the line, even with an unrelated override
+    let (job, text) = job_with(dir.path(), &[("scallop_um = 1.0", "scalop_um = 1.0")]);
+    let line = line_of(&text, "scalop_um");
+    for sets in [&[][..], &["--set", "facets.seed=2"][..]] {
+        let mut args = vec!["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()];
+        args.extend_from_slice(sets);
+        let err = refusal(&brdfmill(&args), &out);
+        assert!(
+            err.starts_with(&format!("error: {}: ", job.display())),
+            "{sets:?}: {err}"
+        );
+        assert!(err.contains(&format!("line {line}")), "{sets:?}: line {line} in {err}");
+        assert!(
+            err.contains("unknown field `scalop_um`") && err.contains("`scallop_um`"),
+            "{err}"
+        );
+        assert!(!err.contains("--set"), "{sets:?}: no override is at fault: {err}");
+    }
+
+    // an override may give what the file leaves out; a typo in another is still that option's, whichever
+    // comes first
+    let (job, text) = job_with(dir.path(), &[]);
+    let profile = line_of(&text, "profile = ");
+    let text: String = text
+        .lines()
+        .enumerate()
+        .filter(|(k, _)| k + 1 != profile)
+        .map(|(_, l)| format!("{l}\n"))
+        .collect();
+    std::fs::write(&job, text).unwrap();
+    let given = format!(
+        "machine.profile=\"{}\"",
+        root().join("machines/grbl-3018.toml").display()
+    );
+    let typed = "toolpath.stok=\"aluminium\"";
+    for sets in [[given.as_str(), typed], [typed, given.as_str()]] {
+        let o = brdfmill(&[
+            "run",
+            job.to_str().unwrap(),
+            "--out",
+            out.to_str().unwrap(),
+            "--set",
+            sets[0],
+            "--set",
+            sets[1],
+        ]);
+        let err = refusal(&o, &out);
+        assert!(err.starts_with(&format!("error: --set {typed}: ")), "{sets:?}: {err}");
+        assert!(err.contains("unknown field `stok`"), "{err}");
+    }
+}
