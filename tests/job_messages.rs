@@ -141,3 +141,63 @@ fn a_typo_is_reported_where_the_user_typed_it() {
         assert!(err.contains("unknown field `stok`"), "{err}");
     }
 }
+
+/// A limit that several keys reach together names every one of them and the values they have, wherever the
+/// user set them: 12×12 facets of 1000 mm at 5 µm are 144 × 200 000² = 5.76e12 samples.
+#[test]
+fn a_derived_limit_names_the_keys_that_drive_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let keys = [
+        "`facets.facets_x`",
+        "`facets.facets_y`",
+        "`facets.facet_mm`",
+        "`facets.pitch_um`",
+    ];
+    let what = "12×12 facets of 1000 mm at 5 µm pitch";
+    let samples = "heightfield of 5.760e12 samples (limit 4e8)";
+
+    let (job, _) = job_with(dir.path(), &[]);
+    let typed = "facets.facet_mm=1000";
+    let o = brdfmill(&[
+        "run",
+        job.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--set",
+        typed,
+    ]);
+    let err = refusal(&o, &out);
+    for want in keys.iter().chain(&[what, samples]) {
+        assert!(err.contains(want), "missing {want} in {err}");
+    }
+    assert!(
+        err.contains(&format!("`facets.facet_mm` from `--set {typed}`")),
+        "{err}"
+    );
+
+    let (job, _) = job_with(dir.path(), &[("facet_mm = 1.0", "facet_mm = 1000.0")]);
+    let o = brdfmill(&["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let err = refusal(&o, &out);
+    assert!(err.starts_with(&format!("error: {}: ", job.display())), "{err}");
+    for want in keys.iter().chain(&[what, samples]) {
+        assert!(err.contains(want), "missing {want} in {err}");
+    }
+    assert!(!err.contains("--set"), "{err}");
+
+    // the annealing's work: sweeps × facets, each named with its section
+    let (job, _) = job_with(
+        dir.path(),
+        &[("seed = 1", "seed = 1\n[facets.anneal]\nsweeps = 1000000000")],
+    );
+    let o = brdfmill(&["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let err = refusal(&o, &out);
+    for want in [
+        "`facets.anneal.sweeps`",
+        "`facets.facets_x`",
+        "`facets.facets_y`",
+        "1000000000 sweeps of 144 facets",
+    ] {
+        assert!(err.contains(want), "missing {want} in {err}");
+    }
+}

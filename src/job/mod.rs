@@ -444,8 +444,8 @@ struct Given {
     relief: bool,
 }
 
-/// A stage's refusal in the job's words: each `` `key` `` of the section's configuration `C` that the message
-/// names becomes `` `section.key` ``.
+/// A stage's refusal in the job's words: each `` `key` `` (or `` `key.sub` ``) of the section's configuration
+/// `C` that the message names becomes `` `section.key` `` (`` `section.key.sub` ``).
 fn keyed<C: Serialize + Default>(section: &str, message: &str) -> String {
     let keys: Vec<String> = match toml::Value::try_from(C::default()) {
         Ok(toml::Value::Table(t)) => t.keys().cloned().collect(),
@@ -453,7 +453,9 @@ fn keyed<C: Serialize + Default>(section: &str, message: &str) -> String {
     };
     let mut out = message.to_string();
     for k in keys {
-        out = out.replace(&format!("`{k}`"), &format!("`{section}.{k}`"));
+        out = out
+            .replace(&format!("`{k}`"), &format!("`{section}.{k}`"))
+            .replace(&format!("`{k}."), &format!("`{section}.{k}."));
     }
     out
 }
