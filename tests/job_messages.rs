@@ -201,3 +201,44 @@ fn a_derived_limit_names_the_keys_that_drive_it() {
         assert!(err.contains(want), "missing {want} in {err}");
     }
 }
+
+/// A misspelt key in a machine profile is reported at its key: the profile's path (found relative to the job
+/// file, not to where brdfmill runs), its line, the bad key and the keys a tool has.
+#[test]
+fn a_typo_in_a_machine_profile_names_the_profile_and_its_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let shipped = std::fs::read_to_string(root().join("machines/grbl-3018.toml")).unwrap();
+    // the last tool's flute length, misspelt
+    let at = shipped.rfind("flute_length_mm").unwrap();
+    let profile = format!(
+        "{}flute_lenght_mm{}",
+        &shipped[..at],
+        &shipped[at + "flute_length_mm".len()..]
+    );
+    let line = shipped[..at].lines().count() + 1;
+    assert_eq!(line_of(&profile, "flute_lenght_mm"), line);
+    std::fs::create_dir(dir.path().join("profiles")).unwrap();
+    let profile_path = dir.path().join("profiles/my-3018.toml");
+    std::fs::write(&profile_path, &profile).unwrap();
+    let (job, _) = job_with(
+        dir.path(),
+        &[(
+            "profile = \"../machines/grbl-3018.toml\"",
+            "profile = \"profiles/my-3018.toml\"",
+        )],
+    );
+    assert_ne!(std::env::current_dir().unwrap(), dir.path());
+    let o = brdfmill(&["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let err = refusal(&o, &out);
+    assert!(
+        err.starts_with(&format!("error: {}: `machine.profile`: ", job.display())),
+        "{err}"
+    );
+    assert!(err.contains(&profile_path.display().to_string()), "{err}");
+    assert!(err.contains(&format!("line {line}")), "line {line}: {err}");
+    assert!(err.contains("unknown field `flute_lenght_mm`"), "{err}");
+    for key in ["`flute_length_mm`", "`diameter_mm`", "`corner_radius_mm`"] {
+        assert!(err.contains(key), "the valid key {key}: {err}");
+    }
+}
