@@ -242,3 +242,64 @@ fn a_typo_in_a_machine_profile_names_the_profile_and_its_line() {
         assert!(err.contains(key), "the valid key {key}: {err}");
     }
 }
+
+/// Run `job` with `sets` until the NDF (a fraction of a second at `ndf.res=32`): the name it prints and the
+/// one `run.json` keeps.
+fn name_of(job: &Path, sets: &[&str], out: &Path) -> (String, String) {
+    let mut args = vec![
+        "run",
+        job.to_str().unwrap(),
+        "--out",
+        out.to_str().unwrap(),
+        "--until",
+        "ndf",
+    ];
+    for s in sets.iter().chain(&["ndf.res=32"]) {
+        args.extend(["--set", s]);
+    }
+    let o = brdfmill(&args);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let printed = stdout
+        .lines()
+        .find_map(|l| l.strip_prefix("job       "))
+        .and_then(|l| l.strip_suffix(&format!(" ({})", job.display())))
+        .unwrap_or_else(|| panic!("no job line in {stdout}"))
+        .to_string();
+    let run: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(out.join("run.json")).unwrap()).unwrap();
+    (printed, run["job"].as_str().unwrap().to_string())
+}
+
+/// A job that gives no name is named after its target as written, and a `--set` of the target renames it;
+/// a name the file gives stays.
+#[test]
+fn the_name_follows_the_target_unless_the_file_gives_one() {
+    let dir = tempfile::tempdir().unwrap();
+    let (job, text) = job_with(dir.path(), &[]);
+    assert!(
+        !text.contains("\nname"),
+        "examples/default.toml names itself after its target"
+    );
+    let words = "isotropic Beckmann α = 0.2, aluminium";
+    assert!(text.contains("brdf = \"beckmann:alpha=0.2,material=aluminium\""));
+    let n = name_of(&job, &[], &dir.path().join("a"));
+    assert_eq!(n, (words.to_string(), words.to_string()));
+
+    let n = name_of(
+        &job,
+        &["target.brdf=ggx:alpha=0.8,material=aluminium"],
+        &dir.path().join("b"),
+    );
+    let words = "isotropic GGX α = 0.8, aluminium";
+    assert_eq!(n, (words.to_string(), words.to_string()));
+
+    let (job, _) = job_with(dir.path(), &[("version = 1\n", "version = 1\nname = \"coupon 7\"\n")]);
+    let n = name_of(
+        &job,
+        &["target.brdf=ggx:alpha=0.8,material=aluminium"],
+        &dir.path().join("c"),
+    );
+    assert_eq!(n, ("coupon 7".to_string(), "coupon 7".to_string()));
+    let n = name_of(&job, &["name=\"coupon 8\""], &dir.path().join("d"));
+    assert_eq!(n, ("coupon 8".to_string(), "coupon 8".to_string()));
+}

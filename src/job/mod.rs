@@ -3,7 +3,7 @@
 //!
 //! ```toml
 //! version = 1
-//! name = "isotropic GGX, aluminium"
+//! name = "GGX samples"                     # optional: without it the job is named after its target
 //!
 //! [target]
 //! brdf = "ggx:alpha=0.3,material=aluminium"  # any BRDF spec (see docs/CLI.md)
@@ -140,7 +140,9 @@ impl SimulateSection {
 pub struct Job {
     /// [`VERSION`].
     pub version: u32,
-    /// A name for the report.
+    /// A name for the report and the program's header; when the file gives none (or an empty one), loading
+    /// names the job after its target ([`Job::load`]), so a `--set` of the target renames it too.
+    #[serde(default)]
     pub name: String,
     /// The target (with `[svbrdf]`, only its `base` and `polish`: the regions give the targets).
     #[serde(default)]
@@ -356,6 +358,9 @@ impl Job {
     /// Compose the stages' plans: the targets, the machine, the toolpath plan, the facets' budgets derived
     /// from its finishing tool, then each remaining section's own check. A refusal names the job's key.
     fn compose(mut self, dir: PathBuf, given: Given) -> Result<Ready, String> {
+        if self.name.trim().is_empty() {
+            self.name = targets::derived_name(&self.target, self.svbrdf.as_ref());
+        }
         crate::cut::machine::program_text("name", &self.name).map_err(|e| e.to_string())?;
         let (targets, merl) = match &self.svbrdf {
             Some(sv) => (targets::region_targets(&self.target, sv, &dir)?, None),

@@ -228,3 +228,154 @@ pub(super) fn read_labels(
         .map_err(|e| format!("`svbrdf.region`: {e}"))?;
     Ok(labels)
 }
+
+/// The name of a job that gives none: its target in words (`isotropic Beckmann α = 0.2, aluminium`, from the
+/// spec as the user wrote it), or with `[svbrdf]` its regions' names; at most 60 characters and no control
+/// characters, as a name must be (it is written into the program's header).
+pub(super) fn derived_name(t: &TargetSection, sv: Option<&SvbrdfSection>) -> String {
+    let words = match (sv, &t.highlight) {
+        (Some(sv), _) => format!(
+            "svBRDF: {}",
+            sv.region.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ")
+        ),
+        (None, Some(png)) => {
+            let mut w = format!("drawn highlight {}", file_name(png));
+            if let Some(m) = &t.material {
+                w += &format!(", {}", m.trim());
+            }
+            w
+        }
+        (None, None) => describe_spec(&t.brdf),
+    };
+    let clean: String = words.chars().map(|c| if c.is_control() { ' ' } else { c }).collect();
+    if clean.chars().count() <= 60 {
+        clean
+    } else {
+        clean.chars().take(59).chain(['…']).collect()
+    }
+}
+
+/// A BRDF spec in words: `beckmann:alpha=0.2,material=aluminium` → `isotropic Beckmann α = 0.2, aluminium`,
+/// `ward:ax=0.08,ay=0.25` → `anisotropic Ward (αx 0.08, αy 0.25)`, `merl:data/gold.binary` → `MERL
+/// gold.binary`; the numbers as written. A spec it cannot read is given as it is (loading refuses it).
+fn describe_spec(spec: &str) -> String {
+    let Some((kind, rest)) = spec.trim().split_once(':') else {
+        return spec.trim().to_string();
+    };
+    let kind = kind.trim().to_ascii_lowercase();
+    let mut tokens: Vec<&str> = rest.split(',').map(str::trim).collect();
+    let file = match kind.as_str() {
+        "merl" | "rgl" | "csv" | "highlight" => file_name(tokens.remove(0)),
+        _ => String::new(),
+    };
+    let params: Vec<(String, &str)> = tokens
+        .iter()
+        .filter_map(|t| t.split_once('='))
+        .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim()))
+        .collect();
+    let get = |key: &str| params.iter().find(|(k, _)| k == key).map(|(_, v)| *v);
+    let family = match kind.as_str() {
+        "beckmann" => "Beckmann",
+        "ggx" => "GGX",
+        "ward" => "Ward",
+        _ => "",
+    };
+    let model = match kind.as_str() {
+        "beckmann" | "ggx" | "ward" => match (get("alpha"), get("ax"), get("ay")) {
+            (Some(a), _, _) => format!("isotropic {family} α = {a}"),
+            (None, Some(x), Some(y)) => format!("anisotropic {family} (αx {x}, αy {y})"),
+            _ => family.to_string(),
+        },
+        "blinn" => format!("Blinn–Phong n = {}", get("n").unwrap_or("?")),
+        "merl" => format!("MERL {file}"),
+        "rgl" => format!("RGL {file}"),
+        "csv" => format!("tabulated NDF {file}"),
+        "highlight" => format!("drawn highlight {file}"),
+        _ => return spec.trim().to_string(),
+    };
+    match (get("material"), get("eta"), get("k")) {
+        (Some(m), _, _) => format!("{model}, {m}"),
+        (None, Some(eta), Some(k)) => format!("{model}, conductor η {eta}, k {k}"),
+        _ => model,
+    }
+}
+
+/// The last part of a path as written.
+fn file_name(path: &str) -> String {
+    let path = path.trim();
+    Path::new(path)
+        .file_name()
+        .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each spec form in words, with the numbers and names exactly as written in the spec.
+    #[test]
+    fn a_spec_reads_as_words() {
+        for (spec, words) in [
+            (
+                "beckmann:alpha=0.2,material=aluminium",
+                "isotropic Beckmann α = 0.2, aluminium",
+            ),
+            (
+                "GGX: alpha = 0.8 , material = aluminium",
+                "isotropic GGX α = 0.8, aluminium",
+            ),
+            ("ward:ax=0.08,ay=0.25", "anisotropic Ward (αx 0.08, αy 0.25)"),
+            (
+                "ggx:ax=0.1,ay=0.3,eta=1.35,k=7.47",
+                "anisotropic GGX (αx 0.1, αy 0.3), conductor η 1.35, k 7.47",
+            ),
+            ("blinn:n=200", "Blinn–Phong n = 200"),
+            ("merl:data/gold.binary,material=gold", "MERL gold.binary, gold"),
+            ("rgl:../rgl/vinyl.bsdf", "RGL vinyl.bsdf"),
+            ("csv:ndf.csv", "tabulated NDF ndf.csv"),
+            ("highlight:ring.png,extent_deg=20", "drawn highlight ring.png"),
+            ("phong:n=3", "phong:n=3"),
+        ] {
+            assert_eq!(describe_spec(spec), words, "{spec}");
+        }
+    }
+
+    /// The job's name, and the program header's, follow a `--set` of the target when the file gives no name,
+    /// and stay what the file says when it gives one.
+    #[test]
+    fn a_derived_name_follows_the_target_and_a_given_one_stays() {
+        let default = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/default.toml"));
+        let set = ["target.brdf=ggx:alpha=0.8,material=aluminium".to_string()];
+        let ready = Job::load_with(default, &set).unwrap();
+        assert_eq!(ready.job.name, "isotropic GGX α = 0.8, aluminium");
+        assert_eq!(ready.toolpath.cfg.job, ready.job.name, "the program's header");
+        let dir = tempfile::tempdir().unwrap();
+        let text = std::fs::read_to_string(default)
+            .unwrap()
+            .replace("version = 1\n", "version = 1\nname = \"sample A\"\n")
+            .replace("../machines/grbl-3018.toml", "grbl-3018");
+        let named = dir.path().join("job.toml");
+        std::fs::write(&named, text).unwrap();
+        let ready = Job::load_with(&named, &set).unwrap();
+        assert_eq!(ready.job.name, "sample A");
+        assert_eq!(ready.toolpath.cfg.job, "sample A");
+    }
+
+    /// A derived name is what a job's `name` may be: no control characters, at most 60 characters.
+    #[test]
+    fn a_derived_name_is_a_valid_name() {
+        let t = TargetSection {
+            brdf: format!("merl:{}\n.binary,material=gold", "x".repeat(80)),
+            ..Default::default()
+        };
+        let name = derived_name(&t, None);
+        assert!(crate::cut::machine::program_text("name", &name).is_ok(), "{name}");
+        assert!(name.starts_with("MERL xxx") && name.ends_with('…'), "{name}");
+        let t = TargetSection {
+            highlight: Some("drawings/star.png".into()),
+            material: Some("aluminium".into()),
+            ..Default::default()
+        };
+        assert_eq!(derived_name(&t, None), "drawn highlight star.png, aluminium");
+    }
+}
