@@ -638,11 +638,13 @@ pub use runner::run;
 mod tests {
     use super::*;
 
-    /// `target.merl_from` has the run write the missing file once (loading writes nothing), and what it wrote
-    /// reads back as the model it came from; it refuses a target that is not a `merl:` file.
+    /// `target.merl_from` has the run write the missing file into its output folder, never beside the job
+    /// (loading writes nothing), and what it wrote reads back as the model it came from; a file that is beside
+    /// the job is read instead; it refuses a target that is not a `merl:` file.
     #[test]
-    fn a_missing_merl_file_is_written_from_its_spec_once() {
+    fn a_missing_merl_file_is_written_from_its_spec_into_the_output_folder() {
         let dir = tempfile::tempdir().unwrap();
+        let out = tempfile::tempdir().unwrap();
         let job = |brdf: &str| {
             let p = dir.path().join("job.toml");
             std::fs::write(
@@ -654,30 +656,25 @@ mod tests {
             .unwrap();
             p
         };
-        let ready = Job::load(&job("merl:m.binary")).unwrap();
-        assert!(!dir.path().join("m.binary").exists(), "loading a job writes nothing");
+        let ready = Job::load(&job("merl:data/m.binary")).unwrap();
         let merl = ready.merl.as_ref().expect("the run is to write the file");
-        merl.write(&ready.targets[0].spec).unwrap();
-        let written = std::fs::metadata(dir.path().join("m.binary"))
-            .unwrap()
-            .modified()
-            .unwrap();
-        let again = Job::load(&job("merl:m.binary")).unwrap();
-        assert!(again.merl.is_none());
-        assert_eq!(
-            std::fs::metadata(dir.path().join("m.binary"))
-                .unwrap()
-                .modified()
-                .unwrap(),
-            written
-        );
+        let (target, spec, file, _) = merl.write(out.path(), &ready.targets[0].spec).unwrap();
+        assert_eq!(file, out.path().join("m.binary"));
+        assert!(file.exists());
+        assert_eq!(spec, format!("merl:{}", file.display()));
+        assert!(!dir.path().join("data").exists(), "nothing beside the job");
         let model = Brdf::parse("beckmann:alpha=0.3").unwrap();
         let (wi, wo) = (
             crate::base::geometry::spherical(0.4, 0.3),
             crate::base::geometry::spherical(0.3, 2.9),
         );
-        let (a, b) = (again.target().eval(&wi, &wo)[1], model.eval(&wi, &wo)[1]);
+        let (a, b) = (target.eval(&wi, &wo)[1], model.eval(&wi, &wo)[1]);
         assert!((a / b - 1.0).abs() < 0.05, "{a} against {b}");
+        // a file beside the job is read, not written
+        std::fs::create_dir(dir.path().join("data")).unwrap();
+        std::fs::copy(&file, dir.path().join("data/m.binary")).unwrap();
+        let again = Job::load(&job("merl:data/m.binary")).unwrap();
+        assert!(again.merl.is_none());
         let e = Job::load(&job("beckmann:alpha=0.2"))
             .err()
             .expect("refused")

@@ -34,11 +34,12 @@ impl RegionTarget {
     }
 }
 
-/// `target.merl_from` for a `merl:` file that does not exist yet: the run writes it from `source` before the
-/// NDF stage and reads the target back from it.
+/// `target.merl_from` for a `merl:` file that does not exist beside the job: the run writes it from `source`
+/// into its output folder (generated data never goes into the job's folder, which may be the source tree)
+/// before the NDF stage, and reads the target back from it.
 #[derive(Clone, Debug)]
 pub struct MerlFrom {
-    /// The file `target.brdf` names.
+    /// The file `target.brdf` names (resolved against the job's folder); only its name is used.
     pub path: PathBuf,
     /// The spec it is written from.
     pub from: String,
@@ -47,20 +48,26 @@ pub struct MerlFrom {
 }
 
 impl MerlFrom {
-    /// Write the file, and read it back as the target (with the spec's `material=` and other options).
-    pub fn write(&self, spec: &str) -> Result<(Brdf, String), Invalid> {
+    /// Write the file into `out` under its name, and read it back as the target (with the spec's `material=`
+    /// and other options): the target, its spec naming the written file, the file and what was done.
+    pub fn write(&self, out: &Path, spec: &str) -> Result<(Brdf, String, PathBuf, String), Invalid> {
+        let name = self
+            .path
+            .file_name()
+            .ok_or_else(|| Invalid(format!("`target.brdf`: `{}` names no file", self.path.display())))?;
+        let file = out.join(name);
         Merl::from_fn(|wi, wo| self.source.eval(wi, wo))
-            .write(&self.path)
+            .write(&file)
             .map_err(|e| Invalid(e.to_string()))?;
-        let target = Brdf::parse(spec).map_err(|e| Invalid(format!("`target.brdf`: {e}")))?;
-        Ok((
-            target,
-            format!(
-                "wrote {} from `{}` (`target.merl_from`)",
-                self.path.display(),
-                self.from
-            ),
-        ))
+        let spec = spec.replacen(&self.path.display().to_string(), &file.display().to_string(), 1);
+        let target = Brdf::parse(&spec).map_err(|e| Invalid(format!("`target.brdf`: {e}")))?;
+        let said = format!(
+            "wrote {} from `{}` (`target.merl_from`; {} does not exist)",
+            file.display(),
+            self.from,
+            self.path.display()
+        );
+        Ok((target, spec, file, said))
     }
 }
 
