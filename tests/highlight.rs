@@ -172,7 +172,7 @@ fn ndf_of_a_hard_ring_is_its_slope_annulus() {
 
 /// Issue 17's acceptance for the star: `brdfmill run examples/highlight-star.toml` passes its verdict, and
 /// the milled surface's highlight correlates at least 0.95 with the image (`metrics.json`
-/// `highlight_corr`), which the report shows beside it.
+/// `highlight_corr`), which the report shows beside it and the closing summary prints.
 #[test]
 fn star_example_casts_its_highlight() {
     let dir = tempfile::tempdir().unwrap();
@@ -195,6 +195,17 @@ fn star_example_casts_its_highlight() {
     assert!(grid > 0.99 && grid >= corr, "grid {grid}");
     assert_eq!(m["pass"].as_bool(), Some(true));
     assert_eq!(o.status.code(), Some(0), "{}", String::from_utf8_lossy(&o.stdout));
+    // the closing summary's milled line gives the figure the verdict turned on, as metrics.json has it
+    let stdout = String::from_utf8_lossy(&o.stdout);
+    let milled = stdout
+        .lines()
+        .find(|l| l.starts_with("milled "))
+        .unwrap_or_else(|| panic!("no milled line in {stdout}"));
+    let min = m["tolerances"]["highlight_corr_min"].as_f64().unwrap();
+    assert!(
+        milled.ends_with(&format!(", highlight corr {corr:.4} (at least {min})")),
+        "{milled}"
+    );
     let report = std::fs::read_to_string(out.join("report.html")).unwrap();
     assert!(report.contains(">Highlight<") && report.contains("the highlight asked for"));
 }

@@ -118,7 +118,10 @@ fn toolpath_and_facets_values_are_refused_before_any_stage_runs() {
         refused(&o, &[want], &out);
     }
     // a job name that would break out of the program's header comment
-    let job = job_with(dir.path(), &[("name = \"isotropic", "name = \"evil)\\nG0 Z-20 (")]);
+    let job = job_with(
+        dir.path(),
+        &[("version = 1\n", "version = 1\nname = \"evil)\\nG0 Z-20 (\"\n")],
+    );
     let o = brdfmill(&["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()]);
     refused(&o, &["job.toml", "`name`"], &out);
 }

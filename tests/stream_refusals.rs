@@ -86,3 +86,62 @@ fn a_port_that_is_not_grbl_is_refused() {
     );
     assert!(!dir.path().join("p.nc.journal.jsonl").exists());
 }
+
+/// `--check` off a terminal (stdout a pipe) says how the `$C` check run went in one line on stdout: a program
+/// with errors ends the run with the first line GRBL rejected, how many more, and that nothing was run (and the
+/// controller's record shows no motion); a clean one says how many lines passed before the job streams.
+#[test]
+fn a_check_run_ends_with_its_result_line() {
+    use brdfmill::apps::stream::emulator::{Emulator, EmulatorConfig};
+    let emu = Emulator::start(EmulatorConfig {
+        time_scale: 50.0,
+        ..EmulatorConfig::default()
+    })
+    .expect("pseudo-terminal");
+    let port = emu.port_path().expect("the emulator's port");
+    let dir = tempfile::tempdir().unwrap();
+    let stream = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        let o = brdfmill()
+            .args([
+                "stream",
+                p.to_str().unwrap(),
+                "--port",
+                port.to_str().unwrap(),
+                "--check",
+            ])
+            .output()
+            .unwrap();
+        let stdout = String::from_utf8_lossy(&o.stdout).into_owned();
+        (o, stdout)
+    };
+    // G5 (cubic spline) and G7 (lathe diameter mode) are not GRBL's: error:20 on lines 3 and 4
+    let (o, stdout) = stream("bad.nc", "G21 G90\nG1 X1 Y1 F500\nG5 X0 Y0\nG7 X0\nG1 X0 Y0\nM2\n");
+    assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_eq!(
+        stdout.lines().last(),
+        Some("check failed at line 3: error:20 (unsupported or invalid G-code command), and 1 more line; nothing was run"),
+        "{stdout}"
+    );
+    assert!(
+        emu.log().executed.is_empty(),
+        "a failed check moved: {:?}",
+        emu.log().executed
+    );
+
+    let text = "G21 G90\nG1 X1 Y1 F500\nG1 X0 Y0\nM2\n";
+    let (o, stdout) = stream("good.nc", text);
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let lines: Vec<&str> = stdout.lines().collect();
+    assert_eq!(
+        lines.first().copied(),
+        Some(format!("check passed: {} lines, no error", text.lines().count()).as_str()),
+        "{stdout}"
+    );
+    assert!(
+        lines[1].starts_with("done: 4 lines"),
+        "the job streamed after the check: {stdout}"
+    );
+    drop(emu);
+}

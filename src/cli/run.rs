@@ -115,14 +115,17 @@ fn summary(a: &Args, t: &brdfmill::stages::toolpath::ToolpathConfig, outcome: &j
     let (rounds, chosen) = &outcome.rounds;
     if let Some(c) = rounds.get(*chosen) {
         println!(
-            "design    {} round{}, round {} chosen: as-milled model corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}]",
+            "design    {} round{}, round {} chosen: as-milled model corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}]{}",
             rounds.len(),
             if rounds.len() == 1 { "" } else { "s" },
             c.round,
             c.ndf_corr,
             c.ndf_l1,
             c.cov_ratio[0],
-            c.cov_ratio[1]
+            c.cov_ratio[1],
+            c.highlight_corr
+                .map(|h| format!(", highlight corr {h:.4}"))
+                .unwrap_or_default()
         );
         println!(
             "slopes    steepest facet {:.1}°, from {}",
@@ -234,8 +237,13 @@ fn verdict(m: &brdfmill::stages::verify::Metrics, allow_shortfall: bool) -> i32 
         "tile      NDF corr {:.4}, L1 {:.4}, JS {:.4}, variance ratio [{:.3}, {:.3}] (facets ⊛ base lobe)",
         m.design.ndf_corr, m.design.ndf_l1, m.design.ndf_js, m.design.cov_ratio[0], m.design.cov_ratio[1]
     );
+    // a drawn highlight's verdict is its correlation with the image: it goes on the milled line with its bound
+    let highlight = m
+        .highlight_corr
+        .map(|c| format!(", highlight corr {c:.4} (at least {})", m.tolerances.highlight_corr_min))
+        .unwrap_or_default();
     println!(
-        "milled    NDF corr {:.4}, L1 {:.4}, JS {:.4}, variance ratio [{:.3}, {:.3}]",
+        "milled    NDF corr {:.4}, L1 {:.4}, JS {:.4}, variance ratio [{:.3}, {:.3}]{highlight}",
         m.milled.ndf_corr, m.milled.ndf_l1, m.milled.ndf_js, m.milled.cov_ratio[0], m.milled.cov_ratio[1]
     );
     verdict_line(

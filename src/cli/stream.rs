@@ -104,7 +104,16 @@ impl Observer for Bar {
         }
     }
     fn note(&mut self, msg: &str) {
-        self.bar.println(msg);
+        // off a terminal the bar is hidden and would drop the line
+        if self.bar.is_hidden() {
+            eprintln!("{msg}");
+        } else {
+            self.bar.println(msg);
+        }
+    }
+    fn check_result(&mut self, line: &str) {
+        // the result, on stdout with the job's own (a failed check ends the run with it)
+        self.bar.suspend(|| println!("{line}"));
     }
 }
 

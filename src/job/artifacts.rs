@@ -61,6 +61,18 @@ impl<'a> Out<'a> {
         Ok(())
     }
 
+    /// The output folder.
+    pub(super) fn dir(&self) -> &Path {
+        self.dir
+    }
+
+    /// A file written into the output folder by other means (a MERL file from `target.merl_from`).
+    pub(super) fn written_elsewhere(&mut self, p: PathBuf) {
+        if !self.written.contains(&p) {
+            self.written.push(p);
+        }
+    }
+
     fn state(&mut self, state: &str) -> Result<(), JobError> {
         let (job, done) = (self.job.clone(), std::mem::take(&mut self.timings));
         let r = write_state(self, &job, &done, state);
@@ -153,6 +165,7 @@ fn describe(p: &Path) -> String {
         "metrics.json" => "verification metrics and verdict",
         "wave.png" => "wave (Kirchhoff) and geometric BRDF of a milled patch",
         "report.html" => "this report",
+        _ if name.ends_with(".binary") => "MERL file written from `target.merl_from`, read back as the target",
         _ => "",
     }
     .to_string()

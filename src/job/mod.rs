@@ -3,7 +3,7 @@
 //!
 //! ```toml
 //! version = 1
-//! name = "isotropic GGX, aluminium"
+//! name = "GGX samples"                     # optional: without it the job is named after its target
 //!
 //! [target]
 //! brdf = "ggx:alpha=0.3,material=aluminium"  # any BRDF spec (see docs/CLI.md)
@@ -140,7 +140,9 @@ impl SimulateSection {
 pub struct Job {
     /// [`VERSION`].
     pub version: u32,
-    /// A name for the report.
+    /// A name for the report and the program's header; when the file gives none (or an empty one), loading
+    /// names the job after its target ([`Job::load`]), so a `--set` of the target renames it too.
+    #[serde(default)]
     pub name: String,
     /// The target (with `[svbrdf]`, only its `base` and `polish`: the regions give the targets).
     #[serde(default)]
@@ -178,6 +180,14 @@ pub enum JobError {
     Invalid {
         /// The job file.
         path: String,
+        /// What is wrong.
+        reason: String,
+    },
+    /// A `--set SECTION.KEY=VALUE` override is wrong: the message names the option as typed and the reason.
+    #[error("--set {option}: {reason}")]
+    Override {
+        /// The override as the user typed it.
+        option: String,
         /// What is wrong.
         reason: String,
     },
@@ -285,30 +295,43 @@ impl Job {
             path: path.display().to_string(),
             reason,
         };
-        let (job, given) = Job::parse(path, overrides).map_err(invalid)?;
+        let (job, given) = Job::parse(path, overrides)?;
         let dir = path
             .parent()
             .map(Path::to_path_buf)
             .unwrap_or_else(|| PathBuf::from("."));
-        job.compose(dir, given).map_err(invalid)
+        job.compose(dir, given)
+            .map_err(|reason| invalid(with_overrides_named(reason, overrides)))
     }
 
     /// The job file with the overrides applied, its version checked, and which of the facets' budget keys it
-    /// gives itself (the others are derived from the finishing tool).
-    fn parse(path: &Path, overrides: &[String]) -> Result<(Job, Given), String> {
-        let text = std::fs::read_to_string(path).map_err(|e| format!("cannot read the job file: {e}"))?;
-        let mut raw: toml::Value = toml::from_str(&text).map_err(|e| e.to_string())?;
+    /// gives itself (the others are derived from the finishing tool). An error is the file's (with its line)
+    /// or the override's that brought it in ([`JobError::Override`]).
+    fn parse(path: &Path, overrides: &[String]) -> Result<(Job, Given), JobError> {
+        let invalid = |reason: String| JobError::Invalid {
+            path: path.display().to_string(),
+            reason,
+        };
+        let text = std::fs::read_to_string(path).map_err(|e| invalid(format!("cannot read the job file: {e}")))?;
+        let file: toml::Value = toml::from_str(&text).map_err(|e| invalid(e.to_string()))?;
+        // the file alone, then after each override in turn: which one brought an error in
+        let mut stages = vec![file.clone()];
+        let mut raw = file;
         for o in overrides {
-            apply_override(&mut raw, o).map_err(|e| format!("--set {o}: {e}"))?;
+            apply_override(&mut raw, o).map_err(|reason| JobError::Override {
+                option: o.clone(),
+                reason,
+            })?;
+            stages.push(raw.clone());
         }
         match raw.get("version").and_then(|v| v.as_integer()) {
             Some(v) if v == VERSION as i64 => {}
             Some(v) => {
-                return Err(format!(
+                return Err(invalid(format!(
                     "`version` = {v}: this build reads job files of version {VERSION}"
-                ))
+                )))
             }
-            None => return Err(format!("missing `version` (expected version = {VERSION})")),
+            None => return Err(invalid(format!("missing `version` (expected version = {VERSION})"))),
         }
         let facets_key = |k: &str| raw.get("facets").and_then(|f| f.get(k)).is_some();
         let given = Given {
@@ -317,9 +340,17 @@ impl Job {
         };
         let job: Job = if overrides.is_empty() {
             // from the text, so an error names its line and column
-            toml::from_str(&text).map_err(|e| e.to_string())?
+            toml::from_str(&text).map_err(|e: toml::de::Error| invalid(e.to_string()))?
         } else {
-            raw.try_into().map_err(|e: toml::de::Error| e.to_string())?
+            raw.try_into()
+                .map_err(|e: toml::de::Error| match override_at_fault(&stages, overrides) {
+                    Some((k, reason)) => JobError::Override {
+                        option: overrides[k].clone(),
+                        reason,
+                    },
+                    // the file's own error: from its text, with the line
+                    None => invalid(toml::from_str::<Job>(&text).err().unwrap_or(e).to_string()),
+                })?
         };
         Ok((job, given))
     }
@@ -327,6 +358,9 @@ impl Job {
     /// Compose the stages' plans: the targets, the machine, the toolpath plan, the facets' budgets derived
     /// from its finishing tool, then each remaining section's own check. A refusal names the job's key.
     fn compose(mut self, dir: PathBuf, given: Given) -> Result<Ready, String> {
+        if self.name.trim().is_empty() {
+            self.name = targets::derived_name(&self.target, self.svbrdf.as_ref());
+        }
         crate::cut::machine::program_text("name", &self.name).map_err(|e| e.to_string())?;
         let (targets, merl) = match &self.svbrdf {
             Some(sv) => (targets::region_targets(&self.target, sv, &dir)?, None),
@@ -415,8 +449,8 @@ struct Given {
     relief: bool,
 }
 
-/// A stage's refusal in the job's words: each `` `key` `` of the section's configuration `C` that the message
-/// names becomes `` `section.key` ``.
+/// A stage's refusal in the job's words: each `` `key` `` (or `` `key.sub` ``) of the section's configuration
+/// `C` that the message names becomes `` `section.key` `` (`` `section.key.sub` ``).
 fn keyed<C: Serialize + Default>(section: &str, message: &str) -> String {
     let keys: Vec<String> = match toml::Value::try_from(C::default()) {
         Ok(toml::Value::Table(t)) => t.keys().cloned().collect(),
@@ -424,7 +458,9 @@ fn keyed<C: Serialize + Default>(section: &str, message: &str) -> String {
     };
     let mut out = message.to_string();
     for k in keys {
-        out = out.replace(&format!("`{k}`"), &format!("`{section}.{k}`"));
+        out = out
+            .replace(&format!("`{k}`"), &format!("`{section}.{k}`"))
+            .replace(&format!("`{k}."), &format!("`{section}.{k}."));
     }
     out
 }
@@ -464,6 +500,82 @@ pub fn tool_slope_cap(tool: &crate::cut::machine::Tool, budget_mm: f64, facet_mm
                 tool.id
             ),
         )
+    }
+}
+
+/// Which override brought in the error the job has once every override is applied, and that error;
+/// `None` when it is the file's own. `stages` is the file alone, then the file after each override in turn
+/// (the last one does not read as a job). The override is the last one whose key is where the error is
+/// (the key itself, a table it replaced, or an unknown key it made up); failing that, when the file alone
+/// reads, the override after the last stage that reads.
+fn override_at_fault(stages: &[toml::Value], overrides: &[String]) -> Option<(usize, String)> {
+    let error = |v: &toml::Value| v.clone().try_into::<Job>().err().map(|e| e.to_string());
+    let last = error(stages.last()?)?;
+    let at = error_key(&last);
+    let keyed = overrides.iter().rposition(|o| {
+        let key = o.split_once('=').map_or(o.as_str(), |(k, _)| k).trim();
+        let key: String = key.split('.').map(str::trim).collect::<Vec<_>>().join(".");
+        key == at.key
+            || at.key.starts_with(&format!("{key}."))
+            || (at.unknown && key.starts_with(&format!("{}.", at.key)))
+    });
+    if let Some(k) = keyed {
+        return Some((k, one_line(&last)));
+    }
+    let errors: Vec<Option<String>> = stages.iter().map(error).collect();
+    errors[0].as_ref()?;
+    let k = errors.iter().rposition(Option::is_none)?;
+    Some((k, one_line(errors[k + 1].as_ref()?)))
+}
+
+/// Where a `toml` error (read from a value, so without a line) is: the dotted key it names and whether that
+/// key is unknown (made up, so an override of a key below it made it).
+struct ErrorKey {
+    key: String,
+    unknown: bool,
+}
+
+fn error_key(message: &str) -> ErrorKey {
+    let table = message
+        .rsplit_once("\nin `")
+        .and_then(|(_, rest)| rest.split_once('`'))
+        .map(|(k, _)| k.to_string());
+    let unknown = message
+        .strip_prefix("unknown field `")
+        .and_then(|rest| rest.split_once('`'))
+        .map(|(k, _)| k.to_string());
+    let key = match (table, &unknown) {
+        (Some(t), Some(u)) => format!("{t}.{u}"),
+        (Some(t), None) => t,
+        (None, Some(u)) => u.clone(),
+        (None, None) => String::new(),
+    };
+    ErrorKey {
+        key,
+        unknown: unknown.is_some(),
+    }
+}
+
+/// A message of the `toml` reader on one line (it puts the key path on a line of its own).
+fn one_line(message: &str) -> String {
+    message.split_whitespace().collect::<Vec<_>>().join(" ")
+}
+
+/// A refusal that names a key an override set says so: `(`key` from `--set key=value`)`.
+fn with_overrides_named(reason: String, overrides: &[String]) -> String {
+    let named: Vec<String> = overrides
+        .iter()
+        .filter_map(|o| {
+            let key = o.split_once('=')?.0.trim();
+            reason
+                .contains(&format!("`{key}`"))
+                .then(|| format!("`{key}` from `--set {o}`"))
+        })
+        .collect();
+    if named.is_empty() {
+        reason
+    } else {
+        format!("{reason} ({})", named.join("; "))
     }
 }
 
@@ -526,11 +638,13 @@ pub use runner::run;
 mod tests {
     use super::*;
 
-    /// `target.merl_from` has the run write the missing file once (loading writes nothing), and what it wrote
-    /// reads back as the model it came from; it refuses a target that is not a `merl:` file.
+    /// `target.merl_from` has the run write the missing file into its output folder, never beside the job
+    /// (loading writes nothing), and what it wrote reads back as the model it came from; a file that is beside
+    /// the job is read instead; it refuses a target that is not a `merl:` file.
     #[test]
-    fn a_missing_merl_file_is_written_from_its_spec_once() {
+    fn a_missing_merl_file_is_written_from_its_spec_into_the_output_folder() {
         let dir = tempfile::tempdir().unwrap();
+        let out = tempfile::tempdir().unwrap();
         let job = |brdf: &str| {
             let p = dir.path().join("job.toml");
             std::fs::write(
@@ -542,30 +656,25 @@ mod tests {
             .unwrap();
             p
         };
-        let ready = Job::load(&job("merl:m.binary")).unwrap();
-        assert!(!dir.path().join("m.binary").exists(), "loading a job writes nothing");
+        let ready = Job::load(&job("merl:data/m.binary")).unwrap();
         let merl = ready.merl.as_ref().expect("the run is to write the file");
-        merl.write(&ready.targets[0].spec).unwrap();
-        let written = std::fs::metadata(dir.path().join("m.binary"))
-            .unwrap()
-            .modified()
-            .unwrap();
-        let again = Job::load(&job("merl:m.binary")).unwrap();
-        assert!(again.merl.is_none());
-        assert_eq!(
-            std::fs::metadata(dir.path().join("m.binary"))
-                .unwrap()
-                .modified()
-                .unwrap(),
-            written
-        );
+        let (target, spec, file, _) = merl.write(out.path(), &ready.targets[0].spec).unwrap();
+        assert_eq!(file, out.path().join("m.binary"));
+        assert!(file.exists());
+        assert_eq!(spec, format!("merl:{}", file.display()));
+        assert!(!dir.path().join("data").exists(), "nothing beside the job");
         let model = Brdf::parse("beckmann:alpha=0.3").unwrap();
         let (wi, wo) = (
             crate::base::geometry::spherical(0.4, 0.3),
             crate::base::geometry::spherical(0.3, 2.9),
         );
-        let (a, b) = (again.target().eval(&wi, &wo)[1], model.eval(&wi, &wo)[1]);
+        let (a, b) = (target.eval(&wi, &wo)[1], model.eval(&wi, &wo)[1]);
         assert!((a / b - 1.0).abs() < 0.05, "{a} against {b}");
+        // a file beside the job is read, not written
+        std::fs::create_dir(dir.path().join("data")).unwrap();
+        std::fs::copy(&file, dir.path().join("data/m.binary")).unwrap();
+        let again = Job::load(&job("merl:data/m.binary")).unwrap();
+        assert!(again.merl.is_none());
         let e = Job::load(&job("beckmann:alpha=0.2"))
             .err()
             .expect("refused")

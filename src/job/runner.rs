@@ -24,7 +24,7 @@ const DEFAULT_POLISH_ALPHA: f64 = 0.06;
 pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Progress)) -> Result<Outcome, JobError> {
     let mut o = Out::new(out, &ready.job.name)?;
     let mut outcome = empty_outcome(ready);
-    let targets = prepare_targets(ready, progress)?;
+    let targets = prepare_targets(ready, &mut o, progress)?;
 
     o.start(progress, Stage::Ndf);
     let nds = ndf_all(ready, &targets, &mut o, &mut outcome)?;
@@ -62,15 +62,21 @@ pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Pro
     o.finish(outcome)
 }
 
-/// The targets as the stages read them: a MERL file the job asks for (`target.merl_from`) is written first
-/// and the target read back from it.
-fn prepare_targets(ready: &Ready, progress: &mut dyn FnMut(Progress)) -> Result<Vec<RegionTarget>, JobError> {
+/// The targets as the stages read them: a MERL file the job asks for (`target.merl_from`) is written first,
+/// into the output folder, and the target read back from it.
+fn prepare_targets(
+    ready: &Ready,
+    o: &mut Out,
+    progress: &mut dyn FnMut(Progress),
+) -> Result<Vec<RegionTarget>, JobError> {
     let mut targets = ready.targets.clone();
     if let Some(m) = &ready.merl {
-        let (target, said) = m
-            .write(&targets[0].spec)
+        let (target, spec, file, said) = m
+            .write(o.dir(), &targets[0].spec)
             .map_err(|e| stage_err::<StageError>("ndf")(StageError::Input(e.0)))?;
         targets[0].target = target;
+        targets[0].spec = spec;
+        o.written_elsewhere(file);
         progress(Progress::Prepared(&said));
     }
     Ok(targets)

@@ -34,11 +34,12 @@ impl RegionTarget {
     }
 }
 
-/// `target.merl_from` for a `merl:` file that does not exist yet: the run writes it from `source` before the
-/// NDF stage and reads the target back from it.
+/// `target.merl_from` for a `merl:` file that does not exist beside the job: the run writes it from `source`
+/// into its output folder (generated data never goes into the job's folder, which may be the source tree)
+/// before the NDF stage, and reads the target back from it.
 #[derive(Clone, Debug)]
 pub struct MerlFrom {
-    /// The file `target.brdf` names.
+    /// The file `target.brdf` names (resolved against the job's folder); only its name is used.
     pub path: PathBuf,
     /// The spec it is written from.
     pub from: String,
@@ -47,20 +48,26 @@ pub struct MerlFrom {
 }
 
 impl MerlFrom {
-    /// Write the file, and read it back as the target (with the spec's `material=` and other options).
-    pub fn write(&self, spec: &str) -> Result<(Brdf, String), Invalid> {
+    /// Write the file into `out` under its name, and read it back as the target (with the spec's `material=`
+    /// and other options): the target, its spec naming the written file, the file and what was done.
+    pub fn write(&self, out: &Path, spec: &str) -> Result<(Brdf, String, PathBuf, String), Invalid> {
+        let name = self
+            .path
+            .file_name()
+            .ok_or_else(|| Invalid(format!("`target.brdf`: `{}` names no file", self.path.display())))?;
+        let file = out.join(name);
         Merl::from_fn(|wi, wo| self.source.eval(wi, wo))
-            .write(&self.path)
+            .write(&file)
             .map_err(|e| Invalid(e.to_string()))?;
-        let target = Brdf::parse(spec).map_err(|e| Invalid(format!("`target.brdf`: {e}")))?;
-        Ok((
-            target,
-            format!(
-                "wrote {} from `{}` (`target.merl_from`)",
-                self.path.display(),
-                self.from
-            ),
-        ))
+        let spec = spec.replacen(&self.path.display().to_string(), &file.display().to_string(), 1);
+        let target = Brdf::parse(&spec).map_err(|e| Invalid(format!("`target.brdf`: {e}")))?;
+        let said = format!(
+            "wrote {} from `{}` (`target.merl_from`; {} does not exist)",
+            file.display(),
+            self.from,
+            self.path.display()
+        );
+        Ok((target, spec, file, said))
     }
 }
 
@@ -227,4 +234,155 @@ pub(super) fn read_labels(
         .check_period([f.facets_x as f64 * f.facet_mm, f.facets_y as f64 * f.facet_mm])
         .map_err(|e| format!("`svbrdf.region`: {e}"))?;
     Ok(labels)
+}
+
+/// The name of a job that gives none: its target in words (`isotropic Beckmann α = 0.2, aluminium`, from the
+/// spec as the user wrote it), or with `[svbrdf]` its regions' names; at most 60 characters and no control
+/// characters, as a name must be (it is written into the program's header).
+pub(super) fn derived_name(t: &TargetSection, sv: Option<&SvbrdfSection>) -> String {
+    let words = match (sv, &t.highlight) {
+        (Some(sv), _) => format!(
+            "svBRDF: {}",
+            sv.region.iter().map(|r| r.name.as_str()).collect::<Vec<_>>().join(", ")
+        ),
+        (None, Some(png)) => {
+            let mut w = format!("drawn highlight {}", file_name(png));
+            if let Some(m) = &t.material {
+                w += &format!(", {}", m.trim());
+            }
+            w
+        }
+        (None, None) => describe_spec(&t.brdf),
+    };
+    let clean: String = words.chars().map(|c| if c.is_control() { ' ' } else { c }).collect();
+    if clean.chars().count() <= 60 {
+        clean
+    } else {
+        clean.chars().take(59).chain(['…']).collect()
+    }
+}
+
+/// A BRDF spec in words: `beckmann:alpha=0.2,material=aluminium` → `isotropic Beckmann α = 0.2, aluminium`,
+/// `ward:ax=0.08,ay=0.25` → `anisotropic Ward (αx 0.08, αy 0.25)`, `merl:data/gold.binary` → `MERL
+/// gold.binary`; the numbers as written. A spec it cannot read is given as it is (loading refuses it).
+fn describe_spec(spec: &str) -> String {
+    let Some((kind, rest)) = spec.trim().split_once(':') else {
+        return spec.trim().to_string();
+    };
+    let kind = kind.trim().to_ascii_lowercase();
+    let mut tokens: Vec<&str> = rest.split(',').map(str::trim).collect();
+    let file = match kind.as_str() {
+        "merl" | "rgl" | "csv" | "highlight" => file_name(tokens.remove(0)),
+        _ => String::new(),
+    };
+    let params: Vec<(String, &str)> = tokens
+        .iter()
+        .filter_map(|t| t.split_once('='))
+        .map(|(k, v)| (k.trim().to_ascii_lowercase(), v.trim()))
+        .collect();
+    let get = |key: &str| params.iter().find(|(k, _)| k == key).map(|(_, v)| *v);
+    let family = match kind.as_str() {
+        "beckmann" => "Beckmann",
+        "ggx" => "GGX",
+        "ward" => "Ward",
+        _ => "",
+    };
+    let model = match kind.as_str() {
+        "beckmann" | "ggx" | "ward" => match (get("alpha"), get("ax"), get("ay")) {
+            (Some(a), _, _) => format!("isotropic {family} α = {a}"),
+            (None, Some(x), Some(y)) => format!("anisotropic {family} (αx {x}, αy {y})"),
+            _ => family.to_string(),
+        },
+        "blinn" => format!("Blinn–Phong n = {}", get("n").unwrap_or("?")),
+        "merl" => format!("MERL {file}"),
+        "rgl" => format!("RGL {file}"),
+        "csv" => format!("tabulated NDF {file}"),
+        "highlight" => format!("drawn highlight {file}"),
+        _ => return spec.trim().to_string(),
+    };
+    match (get("material"), get("eta"), get("k")) {
+        (Some(m), _, _) => format!("{model}, {m}"),
+        (None, Some(eta), Some(k)) => format!("{model}, conductor η {eta}, k {k}"),
+        _ => model,
+    }
+}
+
+/// The last part of a path as written.
+fn file_name(path: &str) -> String {
+    let path = path.trim();
+    Path::new(path)
+        .file_name()
+        .map_or_else(|| path.to_string(), |n| n.to_string_lossy().into_owned())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each spec form in words, with the numbers and names exactly as written in the spec.
+    #[test]
+    fn a_spec_reads_as_words() {
+        for (spec, words) in [
+            (
+                "beckmann:alpha=0.2,material=aluminium",
+                "isotropic Beckmann α = 0.2, aluminium",
+            ),
+            (
+                "GGX: alpha = 0.8 , material = aluminium",
+                "isotropic GGX α = 0.8, aluminium",
+            ),
+            ("ward:ax=0.08,ay=0.25", "anisotropic Ward (αx 0.08, αy 0.25)"),
+            (
+                "ggx:ax=0.1,ay=0.3,eta=1.35,k=7.47",
+                "anisotropic GGX (αx 0.1, αy 0.3), conductor η 1.35, k 7.47",
+            ),
+            ("blinn:n=200", "Blinn–Phong n = 200"),
+            ("merl:data/gold.binary,material=gold", "MERL gold.binary, gold"),
+            ("rgl:../rgl/vinyl.bsdf", "RGL vinyl.bsdf"),
+            ("csv:ndf.csv", "tabulated NDF ndf.csv"),
+            ("highlight:ring.png,extent_deg=20", "drawn highlight ring.png"),
+            ("phong:n=3", "phong:n=3"),
+        ] {
+            assert_eq!(describe_spec(spec), words, "{spec}");
+        }
+    }
+
+    /// The job's name, and the program header's, follow a `--set` of the target when the file gives no name,
+    /// and stay what the file says when it gives one.
+    #[test]
+    fn a_derived_name_follows_the_target_and_a_given_one_stays() {
+        let default = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/examples/default.toml"));
+        let set = ["target.brdf=ggx:alpha=0.8,material=aluminium".to_string()];
+        let ready = Job::load_with(default, &set).unwrap();
+        assert_eq!(ready.job.name, "isotropic GGX α = 0.8, aluminium");
+        assert_eq!(ready.toolpath.cfg.job, ready.job.name, "the program's header");
+        let dir = tempfile::tempdir().unwrap();
+        let text = std::fs::read_to_string(default)
+            .unwrap()
+            .replace("version = 1\n", "version = 1\nname = \"sample A\"\n")
+            .replace("../machines/grbl-3018.toml", "grbl-3018");
+        let named = dir.path().join("job.toml");
+        std::fs::write(&named, text).unwrap();
+        let ready = Job::load_with(&named, &set).unwrap();
+        assert_eq!(ready.job.name, "sample A");
+        assert_eq!(ready.toolpath.cfg.job, "sample A");
+    }
+
+    /// A derived name is what a job's `name` may be: no control characters, at most 60 characters.
+    #[test]
+    fn a_derived_name_is_a_valid_name() {
+        let t = TargetSection {
+            brdf: format!("merl:{}\n.binary,material=gold", "x".repeat(80)),
+            ..Default::default()
+        };
+        let name = derived_name(&t, None);
+        assert!(crate::cut::machine::program_text("name", &name).is_ok(), "{name}");
+        assert!(name.starts_with("MERL xxx") && name.ends_with('…'), "{name}");
+        let t = TargetSection {
+            highlight: Some("drawings/star.png".into()),
+            material: Some("aluminium".into()),
+            ..Default::default()
+        };
+        assert_eq!(derived_name(&t, None), "drawn highlight star.png, aluminium");
+    }
 }

@@ -45,6 +45,9 @@ pub enum FacetsError {
         /// What was expected.
         reason: String,
     },
+    /// A limit that several fields reach together: the message names each of them.
+    #[error("facets config: {0}")]
+    Limit(String),
     /// The NDF cannot be sampled.
     #[error("ndf: {0}")]
     Ndf(String),
@@ -129,17 +132,16 @@ impl FacetsConfig {
         let count = self.facets_x.checked_mul(self.facets_y);
         // each axis needs two facets: one column or row has no neighbour to integrate against (and the
         // periodic Poisson solver's FFT needs two samples along x)
-        if self.facets_x < 2 || self.facets_y < 2 {
-            return bad(
-                "facets",
-                format!("must be at least 2×2 facets, got {}x{}", self.facets_x, self.facets_y),
-            );
+        let (fx, fy) = (self.facets_x, self.facets_y);
+        if fx < 2 || fy < 2 {
+            return Err(FacetsError::Limit(format!(
+                "`facets_x` × `facets_y` must be at least 2×2 facets, got {fx}x{fy}"
+            )));
         }
         if count.is_none_or(|n| n > 1 << 20) {
-            return bad(
-                "facets",
-                format!("{}x{} is more than 2^20 facets", self.facets_x, self.facets_y),
-            );
+            return Err(FacetsError::Limit(format!(
+                "`facets_x` × `facets_y` = {fx}x{fy} is more than 2^20 facets"
+            )));
         }
         if !(self.facet_mm.is_finite() && self.facet_mm > 0.0) {
             return bad(
@@ -172,12 +174,12 @@ impl FacetsConfig {
                 ),
             );
         }
-        let samples = (self.facets_x * self.facets_y) as f64 * ratio.round().powi(2);
+        let samples = (fx * fy) as f64 * ratio.round().powi(2);
         if samples > 4e8 {
-            return bad(
-                "pitch_um",
-                format!("the heightfield would have {samples:.3e} samples (limit 4e8)"),
-            );
+            return Err(FacetsError::Limit(format!(
+                "{fx}×{fy} facets of {} mm at {} µm pitch (`facets_x` × `facets_y` × (`facet_mm` / `pitch_um`)²) would be a heightfield of {samples:.3e} samples (limit 4e8)",
+                self.facet_mm, self.pitch_um
+            )));
         }
         if !(self.max_slope_deg > 0.0 && self.max_slope_deg < 89.0) {
             return bad(
@@ -209,14 +211,11 @@ impl FacetsConfig {
         // annealing work is sweeps × facets swap proposals
         let work = self.anneal.sweeps as f64 * (self.facets_x * self.facets_y) as f64;
         if work > 1e11 {
-            return bad(
-                "anneal.sweeps",
-                format!(
-                    "{} sweeps of {} facets is {work:.2e} swap proposals (limit 1e11, about an hour)",
-                    self.anneal.sweeps,
-                    self.facets_x * self.facets_y
-                ),
-            );
+            return Err(FacetsError::Limit(format!(
+                "{} sweeps of {} facets (`anneal.sweeps` × `facets_x` × `facets_y`) is {work:.2e} swap proposals (limit 1e11, about an hour)",
+                self.anneal.sweeps,
+                fx * fy
+            )));
         }
         if !(self.cvt_weight_exponent > 0.0 && self.cvt_weight_exponent <= 8.0) {
             return bad(

@@ -12,11 +12,14 @@ use crate::apps::stream::protocol::{alarm_text, error_text, parse_response, Coun
 /// `(line, message)` for each line check mode rejected.
 type Problems = Vec<(usize, String)>;
 
+/// What the check run saw: how many lines it sent, the lines rejected, and the alarm it stopped at, if any.
+type Checked = (usize, Problems, Option<(usize, String)>);
+
 impl Session<'_> {
     /// The `$C` check run: every line parsed by GRBL without moving; errors collected.
     pub(super) fn check_run(&mut self) -> Result<(), StreamError> {
         self.command_alone("$C")?;
-        let (mut problems, alarm) = self.check_lines()?;
+        let (checked, mut problems, alarm) = self.check_lines()?;
         if let Some(a) = alarm {
             problems.push(a);
             self.reset_and_wait_banner()?;
@@ -25,8 +28,8 @@ impl Session<'_> {
             self.command_alone("$C")?;
             self.wait_banner()?;
         }
+        self.observer.check_result(&result_line(checked, &problems));
         if problems.is_empty() {
-            self.observer.note("check mode: no errors");
             Ok(())
         } else {
             Err(StreamError::CheckFailed {
@@ -36,9 +39,9 @@ impl Session<'_> {
         }
     }
 
-    /// Stream the program's G-code lines in check mode; returns the rejected lines and, if check mode
-    /// raised an alarm, the line it came at (the stream stops there).
-    fn check_lines(&mut self) -> Result<(Problems, Option<(usize, String)>), StreamError> {
+    /// Stream the program's G-code lines in check mode; returns how many there are, the rejected lines and,
+    /// if check mode raised an alarm, the line it came at (the stream stops there).
+    fn check_lines(&mut self) -> Result<Checked, StreamError> {
         let mut problems = Vec::new();
         let mut q: VecDeque<(usize, String)> = self
             .program
@@ -46,6 +49,7 @@ impl Session<'_> {
             .filter(|l| l.kind == LineKind::Gcode)
             .map(|l| (l.number, l.wire_text(self.cfg.number_lines)))
             .collect();
+        let checked = q.len();
         let mut counter: Counter<usize> = self.counter.clone_empty();
         while !q.is_empty() || counter.outstanding() > 0 {
             if self.stop.load(Ordering::SeqCst) {
@@ -80,12 +84,29 @@ impl Session<'_> {
                 }
                 Response::Alarm(c) => {
                     let n = counter.pending().next().copied().unwrap_or(0);
-                    return Ok((problems, Some((n, format!("ALARM:{c} ({})", alarm_text(c))))));
+                    return Ok((checked, problems, Some((n, format!("ALARM:{c} ({})", alarm_text(c))))));
                 }
                 _ => {}
             }
         }
-        Ok((problems, None))
+        Ok((checked, problems, None))
+    }
+}
+
+/// The check run's result in one line: `check passed: 4 lines, no error`, or the first line it failed at
+/// with GRBL's answer, how many more failed, and that nothing was run.
+fn result_line(checked: usize, problems: &Problems) -> String {
+    let lines = if checked == 1 { "line" } else { "lines" };
+    match problems.iter().min_by_key(|(n, _)| *n) {
+        None => format!("check passed: {checked} {lines}, no error"),
+        Some((n, what)) => {
+            let more = match problems.len() - 1 {
+                0 => String::new(),
+                1 => ", and 1 more line".to_string(),
+                k => format!(", and {k} more lines"),
+            };
+            format!("check failed at line {n}: {what}{more}; nothing was run")
+        }
     }
 }
 

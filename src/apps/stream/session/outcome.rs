@@ -29,6 +29,11 @@ pub trait Observer {
     fn progress(&mut self, _p: &Progress) {}
     /// Something worth telling the user (a message from the controller, an error carried over).
     fn note(&mut self, _msg: &str) {}
+    /// The `$C` check run (`--check`) ended: one line that says how, `check passed: N lines, no error` or
+    /// `check failed at line N: error:K (…)…; nothing was run`. The default passes it on as a note.
+    fn check_result(&mut self, line: &str) {
+        self.note(line);
+    }
     /// Asked before the soft reset that follows a critical alarm (`alarm` says which and what to check).
     /// Motion has already stopped; the reset only lets the controller answer again. `false` leaves the
     /// controller in alarm, and nothing more is sent: a `--resume` resets it later and reads where motion
