@@ -412,6 +412,7 @@ fn fault_trial(seed: u64) -> TrialResult {
 /// on stock, `Ln` and `Bf` builds: across fault and resume no motion line is lost and, unless the stop
 /// position was ambiguous (journaled), every one runs exactly once, by the controller's own record.
 #[test]
+#[ignore = "slow (200 fault trials): cargo test -- --ignored runs it, and .ci/run"]
 fn injected_faults_then_resume_run_every_motion_line_exactly_once() {
     let trials = 200;
     let seeds: Vec<u64> = match std::env::var("TRIAL_SEED") {

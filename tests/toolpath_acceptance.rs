@@ -75,6 +75,7 @@ fn default_programs() -> Vec<(&'static str, toolpath::Toolpath)> {
 }
 
 #[test]
+#[ignore = "slow (the default job's programs simulated): cargo test -- --ignored runs it, and .ci/run"]
 fn default_job_covers_the_area_without_gouging() {
     for (profile, p) in default_programs() {
         let s = &p.summary;
