@@ -51,7 +51,7 @@ fn chromium_on(report: &Path, mode: &str) -> std::process::Output {
             "--disable-component-update",
             "--disable-sync",
             "--hide-scrollbars",
-            "--window-size=1280,3000",
+            "--window-size=1280,12000",
         ])
         .arg(format!("--user-data-dir={}", profile.path().display()))
         .arg(mode)
