@@ -16,6 +16,15 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
+/// `brdfmill run JOB --out OUT` with a `--set` for each of `sets`.
+fn run_job(job: &Path, out: &Path, sets: &[&str]) -> Output {
+    let mut args = vec!["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()];
+    for s in sets {
+        args.extend(["--set", s]);
+    }
+    brdfmill(&args)
+}
+
 /// The run was refused (exit 1, nothing written); its message, from stderr.
 fn refusal(o: &Output, out: &Path) -> String {
     let err = String::from_utf8_lossy(&o.stderr).into_owned();
@@ -56,16 +65,7 @@ fn a_typo_is_reported_where_the_user_typed_it() {
     let out = dir.path().join("out");
     let (job, _) = job_with(dir.path(), &[]);
     let typed = "toolpath.scalop_um=1";
-    let o = brdfmill(&[
-        "run",
-        job.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--set",
-        "facets.seed=2",
-        "--set",
-        typed,
-    ]);
+    let o = run_job(&job, &out, &["facets.seed=2", typed]);
     let err = refusal(&o, &out);
     assert!(err.starts_with(&format!("error: --set {typed}: ")), "{err}");
     assert!(!err.contains("job.toml"), "the job file is not at fault: {err}");
@@ -78,14 +78,7 @@ fn a_typo_is_reported_where_the_user_typed_it() {
 
     // a wrong value is the option's too, with its key
     let typed = "toolpath.scallop_um=abc";
-    let o = brdfmill(&[
-        "run",
-        job.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--set",
-        typed,
-    ]);
+    let o = run_job(&job, &out, &[typed]);
     let err = refusal(&o, &out);
     assert!(err.starts_with(&format!("error: --set {typed}: ")), "{err}");
     assert!(err.contains("`toolpath.scallop_um`"), "{err}");
@@ -93,10 +86,8 @@ fn a_typo_is_reported_where_the_user_typed_it() {
     // the typo in the file: the file and the line, even with an unrelated override
     let (job, text) = job_with(dir.path(), &[("scallop_um = 1.0", "scalop_um = 1.0")]);
     let line = line_of(&text, "scalop_um");
-    for sets in [&[][..], &["--set", "facets.seed=2"][..]] {
-        let mut args = vec!["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()];
-        args.extend_from_slice(sets);
-        let err = refusal(&brdfmill(&args), &out);
+    for sets in [&[][..], &["facets.seed=2"][..]] {
+        let err = refusal(&run_job(&job, &out, sets), &out);
         assert!(
             err.starts_with(&format!("error: {}: ", job.display())),
             "{sets:?}: {err}"
@@ -126,16 +117,7 @@ fn a_typo_is_reported_where_the_user_typed_it() {
     );
     let typed = "toolpath.stok=\"aluminium\"";
     for sets in [[given.as_str(), typed], [typed, given.as_str()]] {
-        let o = brdfmill(&[
-            "run",
-            job.to_str().unwrap(),
-            "--out",
-            out.to_str().unwrap(),
-            "--set",
-            sets[0],
-            "--set",
-            sets[1],
-        ]);
+        let o = run_job(&job, &out, &sets);
         let err = refusal(&o, &out);
         assert!(err.starts_with(&format!("error: --set {typed}: ")), "{sets:?}: {err}");
         assert!(err.contains("unknown field `stok`"), "{err}");
@@ -159,14 +141,7 @@ fn a_derived_limit_names_the_keys_that_drive_it() {
 
     let (job, _) = job_with(dir.path(), &[]);
     let typed = "facets.facet_mm=1000";
-    let o = brdfmill(&[
-        "run",
-        job.to_str().unwrap(),
-        "--out",
-        out.to_str().unwrap(),
-        "--set",
-        typed,
-    ]);
+    let o = run_job(&job, &out, &[typed]);
     let err = refusal(&o, &out);
     for want in keys.iter().chain(&[what, samples]) {
         assert!(err.contains(want), "missing {want} in {err}");
@@ -177,7 +152,7 @@ fn a_derived_limit_names_the_keys_that_drive_it() {
     );
 
     let (job, _) = job_with(dir.path(), &[("facet_mm = 1.0", "facet_mm = 1000.0")]);
-    let o = brdfmill(&["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o = run_job(&job, &out, &[]);
     let err = refusal(&o, &out);
     assert!(err.starts_with(&format!("error: {}: ", job.display())), "{err}");
     for want in keys.iter().chain(&[what, samples]) {
@@ -190,7 +165,7 @@ fn a_derived_limit_names_the_keys_that_drive_it() {
         dir.path(),
         &[("seed = 1", "seed = 1\n[facets.anneal]\nsweeps = 1000000000")],
     );
-    let o = brdfmill(&["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o = run_job(&job, &out, &[]);
     let err = refusal(&o, &out);
     for want in [
         "`facets.anneal.sweeps`",
@@ -229,7 +204,7 @@ fn a_typo_in_a_machine_profile_names_the_profile_and_its_line() {
         )],
     );
     assert_ne!(std::env::current_dir().unwrap(), dir.path());
-    let o = brdfmill(&["run", job.to_str().unwrap(), "--out", out.to_str().unwrap()]);
+    let o = run_job(&job, &out, &[]);
     let err = refusal(&o, &out);
     assert!(
         err.starts_with(&format!("error: {}: `machine.profile`: ", job.display())),

@@ -160,20 +160,25 @@ fn bad_label_setups_are_refused_with_what_is_wrong() {
 }
 
 /// The logo example end to end: the acceptance of issue 17's second half.
-#[test]
-#[ignore = "slow (the logo job end to end): cargo test -- --ignored runs it, and .ci/run"]
-fn logo_example_mills_each_region_to_its_own_target() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("out");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_brdfmill"))
+/// `brdfmill run examples/svbrdf-logo.toml --out OUT`.
+fn run_logo(out: &Path) -> std::process::Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_brdfmill"))
         .args([
             "run",
             root().join("examples/svbrdf-logo.toml").to_str().unwrap(),
             "--out",
         ])
-        .arg(&out)
+        .arg(out)
         .output()
-        .unwrap();
+        .unwrap()
+}
+
+#[test]
+#[ignore = "slow (the logo job end to end): cargo test -- --ignored runs it, and .ci/run"]
+fn logo_example_mills_each_region_to_its_own_target() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    let o = run_logo(&out);
     let stdout = String::from_utf8_lossy(&o.stdout);
     let m: serde_json::Value = serde_json::from_slice(&std::fs::read(out.join("metrics.json")).unwrap()).unwrap();
     assert_eq!(m["kind"], "svbrdf");
@@ -265,15 +270,7 @@ fn logo_example_mills_each_region_to_its_own_target() {
 fn logo_report_renders_in_chromium() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("out");
-    let o = std::process::Command::new(env!("CARGO_BIN_EXE_brdfmill"))
-        .args([
-            "run",
-            root().join("examples/svbrdf-logo.toml").to_str().unwrap(),
-            "--out",
-        ])
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = run_logo(&out);
     assert!(matches!(o.status.code(), Some(0 | 3)), "{o:?}");
     report_probe::check(&out.join("report.html"), "simulated milled part");
 }

@@ -10,6 +10,7 @@
 
 use crate::base::geometry::Vec3;
 use crate::base::heightfield::Heightfield;
+use crate::base::plot::escape_markup as esc;
 use crate::base::plot::{Canvas, Heatmap, Scale};
 use crate::base::slope::SlopeDomain;
 use crate::base::surface::ndf_of_slopes;
@@ -399,13 +400,6 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
     );
     crate::base::io::write_atomic(&out.join("report.html"), html.as_bytes())?;
     Ok(analysis)
-}
-
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
 }
 
 fn report_html(a: &Analysis, figs: &[(&Canvas, &str)]) -> String {

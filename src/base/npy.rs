@@ -22,29 +22,30 @@ pub enum NpyError {
 
 /// Write a row-major `rows × cols` array of `f64` as `.npy` (C order, little-endian), atomically.
 pub fn write_f64_2d(path: &Path, rows: usize, cols: usize, data: &[f64]) -> Result<(), crate::base::io::WriteError> {
-    assert_eq!(data.len(), rows * cols, "npy shape does not match the data");
-    crate::base::io::write_atomic_with(path, |w| {
-        let mut writer = npyz::WriteOptions::<f64>::new()
-            .default_dtype()
-            .shape(&[rows as u64, cols as u64])
-            .writer(w)
-            .begin_nd()?;
-        writer.extend(data.iter().copied())?;
-        writer.finish()
-    })
+    write_2d(path, rows, cols, data.iter().copied())
 }
 
 /// Write a row-major `rows × cols` array as `.npy` of `f32` (C order, little-endian), atomically: each
 /// value rounded to the nearest `f32`, a relative error of at most 2⁻²⁴ (0.06 nm on a height of 1 mm).
 pub fn write_f32_2d(path: &Path, rows: usize, cols: usize, data: &[f64]) -> Result<(), crate::base::io::WriteError> {
-    assert_eq!(data.len(), rows * cols, "npy shape does not match the data");
+    write_2d(path, rows, cols, data.iter().map(|&v| v as f32))
+}
+
+/// The writer of both: `rows × cols` values of `T`, in the dtype NumPy knows for it.
+fn write_2d<T: npyz::AutoSerialize>(
+    path: &Path,
+    rows: usize,
+    cols: usize,
+    values: impl ExactSizeIterator<Item = T>,
+) -> Result<(), crate::base::io::WriteError> {
+    assert_eq!(values.len(), rows * cols, "npy shape does not match the data");
     crate::base::io::write_atomic_with(path, |w| {
-        let mut writer = npyz::WriteOptions::<f32>::new()
+        let mut writer = npyz::WriteOptions::<T>::new()
             .default_dtype()
             .shape(&[rows as u64, cols as u64])
             .writer(w)
             .begin_nd()?;
-        writer.extend(data.iter().map(|&v| v as f32))?;
+        writer.extend(values)?;
         writer.finish()
     })
 }

@@ -197,7 +197,7 @@ fn compose(
         ),
         &part.heightfield.relief_png("composed part", 1024),
     );
-    o.write("part.png", &fig.png)?;
+    o.write("part.png", &fig.png())?;
     o.write("labels.png", &labels.figure(1024).to_png())?;
     Ok((part, fig))
 }
@@ -384,7 +384,7 @@ fn verify_regions(
     )
     .map_err(stage_err("verify"))?;
     if let Some(strip) = vfigs.iter().find(|f| f.title.contains("moving light")) {
-        o.write("light.png", &strip.png)?;
+        o.write("light.png", &strip.png())?;
     }
     let metrics_json = serde_json::to_string_pretty(&metrics).map_err(stage_err("verify"))?;
     o.write("metrics.json", metrics_json.as_bytes())?;

@@ -226,7 +226,7 @@ pub(super) fn facets_stage(n: &Ndf, tile: Tile, suffix: &str, o: &mut Out) -> Re
     );
     o.write(&format!("tile{suffix}.json"), tile_file.to_json().as_bytes())?;
     o.npy(&format!("tile{suffix}.npy"), &tile.heightfield)?;
-    o.write(&format!("tile{suffix}.png"), &tile_figure.png)?;
+    o.write(&format!("tile{suffix}.png"), &tile_figure.png())?;
     o.write(&format!("tile{suffix}.stl"), &tile.stl())?;
     Ok((tile, tile_figure))
 }
@@ -255,7 +255,7 @@ fn simulate_stage(
         ),
         &sim_canvas,
     );
-    o.write("sim.png", &sim_figure.png)?;
+    o.write("sim.png", &sim_figure.png())?;
     let (dev_canvas, dev_range_um) = dev.to_png("simulated - design (µm)", 1024);
     let [lo, hi] = dev_range_um;
     let dev_figure = report::Figure::new(
@@ -272,7 +272,7 @@ fn simulate_stage(
         ),
         &dev_canvas,
     );
-    o.write("deviation.png", &dev_figure.png)?;
+    o.write("deviation.png", &dev_figure.png())?;
     o.write(
         "sim.json",
         SimFile::new(

@@ -58,6 +58,15 @@ pub fn glyph_text(s: &str) -> String {
     out
 }
 
+/// The left edge of text `width` pixels wide anchored at `x` with `align`.
+fn left_edge(x: i32, width: i32, align: Alignment) -> i32 {
+    match align {
+        Alignment::Left => x,
+        Alignment::Center => x - width / 2,
+        Alignment::Right => x - width,
+    }
+}
+
 /// A vector mark on a [`Canvas`].
 #[derive(Clone, Debug, PartialEq)]
 pub enum Mark {
@@ -158,11 +167,7 @@ impl Canvas {
             self.label_defects.push(format!("missing glyph in {s:?}"));
         }
         let width = drawn.chars().count() as i32 * CHAR_PX;
-        let left = match align {
-            Alignment::Left => x,
-            Alignment::Center => x - width / 2,
-            Alignment::Right => x - width,
-        };
+        let left = left_edge(x, width, align);
         let moved = left.min(self.width as i32 - width).max(0);
         let top = y - FONT_6X10.baseline as i32;
         let h = FONT_6X10.character_size.height as i32;
@@ -276,12 +281,7 @@ impl Canvas {
     /// spelt in ASCII ([`glyph_text`]).
     fn raster_text(&mut self, x: i32, y: i32, s: &str, align: Alignment) {
         let drawn = glyph_text(s);
-        let width = drawn.chars().count() as i32 * CHAR_PX;
-        let left = match align {
-            Alignment::Left => x,
-            Alignment::Center => x - width / 2,
-            Alignment::Right => x - width,
-        };
+        let left = left_edge(x, drawn.chars().count() as i32 * CHAR_PX, align);
         let latin = MonoTextStyle::new(&FONT_6X10, Rgb888::BLACK);
         let greek = MonoTextStyle::new(&GREEK_6X10, Rgb888::BLACK);
         let mut buf = [0u8; 4];
@@ -408,7 +408,7 @@ impl Canvas {
                     };
                     s.push_str(&format!(
                         "<text x=\"{x}\" y=\"{y}\" text-anchor=\"{anchor}\">{}</text>",
-                        xml_escape(text)
+                        escape_markup(text)
                     ));
                 }
             }
@@ -418,9 +418,13 @@ impl Canvas {
     }
 }
 
-/// Text as XML character data.
-fn xml_escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+/// Text as XML or HTML character data or attribute value: `&`, `<`, `>` and `"` escaped (the SVG's labels,
+/// and the report pages that hold them).
+pub fn escape_markup(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
+        .replace('"', "&quot;")
 }
 
 /// The raster layer as PNG bytes (marks not drawn).

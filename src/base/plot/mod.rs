@@ -5,7 +5,7 @@
 
 mod canvas;
 
-pub use canvas::{glyph_text, Canvas, Mark, CHAR_PX, DASH_PX};
+pub use canvas::{escape_markup, glyph_text, Canvas, Mark, CHAR_PX, DASH_PX};
 pub use embedded_graphics::text::Alignment;
 
 /// How values map to colour.

@@ -3,6 +3,7 @@
 
 use super::metrics::SurfaceMetrics;
 use super::Metrics;
+use crate::base::plot::escape_markup as esc;
 
 /// A picture with a caption.
 pub struct Figure {
@@ -10,25 +11,28 @@ pub struct Figure {
     pub title: String,
     /// What it shows.
     pub caption: String,
-    /// The drawing as PNG bytes (the job's `.png` artifacts), text drawn in a bitmap font.
-    pub png: Vec<u8>,
     /// The drawing as an SVG element ([`crate::base::plot::Canvas::to_svg`]): text as text.
     pub svg: String,
-    /// Labels the figure could not draw as given ([`crate::base::plot::Canvas::label_defects`]); the page lists
-    /// them under the figure with the class `label-defect`.
-    pub label_defects: Vec<String>,
+    /// The drawing, kept for [`Figure::png`] (a few figures are also written as `.png` files) and for its
+    /// label defects ([`crate::base::plot::Canvas::label_defects`]), which the page lists under the figure
+    /// with the class `label-defect`.
+    pub canvas: crate::base::plot::Canvas,
 }
 
 impl Figure {
-    /// A figure from a drawn canvas (encoded here), keeping its label defects.
+    /// A figure from a drawn canvas, its SVG written here.
     pub fn new(title: impl Into<String>, caption: impl Into<String>, canvas: &crate::base::plot::Canvas) -> Self {
         Self {
             title: title.into(),
             caption: caption.into(),
-            png: canvas.to_png(),
             svg: canvas.to_svg(),
-            label_defects: canvas.label_defects.clone(),
+            canvas: canvas.clone(),
         }
+    }
+
+    /// The drawing as PNG bytes (a job's `.png` artifacts), text drawn in a bitmap font.
+    pub fn png(&self) -> Vec<u8> {
+        self.canvas.to_png()
     }
 }
 
@@ -54,13 +58,6 @@ pub struct Report<'a> {
     pub program: Vec<(String, String)>,
     /// Artifacts written, as (file, what).
     pub artifacts: Vec<(String, String)>,
-}
-
-fn esc(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
-        .replace('"', "&quot;")
 }
 
 /// Prose for the page: escaped, a `quoted` name (a key, a file, a tool, a spec) set as code rather than
@@ -174,7 +171,7 @@ impl Report<'_> {
                 f.svg,
                 rich(&f.caption)
             ));
-            for d in &f.label_defects {
+            for d in &f.canvas.label_defects {
                 h.push_str(&format!("<p class=\"label-defect\">Figure defect: {}</p>", esc(d)));
             }
         }
