@@ -40,12 +40,19 @@ fn require_rs274() {
     );
 }
 
-/// Run LinuxCNC's standalone interpreter; Ok(canonical command count) or Err(its message).
-fn interpret(gcode: &str) -> Result<usize, String> {
+/// Run LinuxCNC's standalone interpreter on `gcode` with the tool table brdfmill writes for `machine` (as
+/// the setup sheet tells the operator to: `rs274 -t tool.tbl -g …`), so that a tool change reads the
+/// profile's tools and not whatever table rs274 finds by default; Ok(canonical command count) or Err(its
+/// message).
+fn interpret(gcode: &str, machine: &Machine) -> Result<usize, String> {
     let dir = tempfile::tempdir().unwrap();
     let (prog, canon) = (dir.path().join("p.ngc"), dir.path().join("p.canon"));
+    let table = dir.path().join(brdfmill::gcode::TOOL_TABLE_FILE);
     std::fs::write(&prog, gcode).unwrap();
+    std::fs::write(&table, brdfmill::gcode::tool_table(machine)).unwrap();
     let out = std::process::Command::new("rs274")
+        .arg("-t")
+        .arg(&table)
         .arg("-g")
         .arg(&prog)
         .arg(&canon)
@@ -138,7 +145,7 @@ fn default_job_covers_the_area_without_gouging() {
 fn default_job_passes_rs274() {
     require_rs274();
     for (profile, p) in default_programs() {
-        let n = interpret(&p.gcode).unwrap_or_else(|e| panic!("{profile}: {e}"));
+        let n = interpret(&p.gcode, &machine(profile)).unwrap_or_else(|e| panic!("{profile}: {e}"));
         println!(
             "{profile}: rs274 produced {n} canonical commands for {} lines",
             p.summary.lines
@@ -156,10 +163,10 @@ fn default_job_passes_rs274() {
 fn rs274_check_itself_catches_a_bad_program() {
     require_rs274();
     assert!(
-        interpret("G21 G90\nG1 X1 Y1\nM2\n").is_err(),
+        interpret("G21 G90\nG1 X1 Y1\nM2\n", &machine("linuxcnc-mill.toml")).is_err(),
         "G1 without a feed must be refused"
     );
-    assert!(interpret("G21 G90\nG1 X1 F100\nM2\n").is_ok());
+    assert!(interpret("G21 G90\nG1 X1 F100\nM2\n", &machine("linuxcnc-mill.toml")).is_ok());
 }
 
 #[test]
@@ -642,7 +649,7 @@ fn rs274_accepts_every_program() {
         let tile = pocket(depth);
         for (profile, rough) in SETUPS {
             let p = program(profile, rough, &tile);
-            interpret(&p.gcode).unwrap_or_else(|e| panic!("{profile} depth {depth}: {e}"));
+            interpret(&p.gcode, &machine(profile)).unwrap_or_else(|e| panic!("{profile} depth {depth}: {e}"));
         }
     }
 }
