@@ -98,6 +98,8 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
     for f in [
         "ndf.json",
         "ndf.png",
+        "ndf-design.json",
+        "ndf-milled.json",
         "tile.json",
         "tile.npy",
         "tile.png",
@@ -282,6 +284,52 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
             "{side}: pass, with failures {failed:?}"
         );
     }
+    // ndf-design.json and ndf-milled.json hold the grids the verdict measured, each beside the reference:
+    // its L1, correlation and Jensen–Shannon figures recompute from the files alone, with the sums written
+    // out here rather than brdfmill's, to 1e-9.
+    let reference = json(&p("ndf.json"))["observed"].clone();
+    for (file, side) in [("ndf-design.json", "design"), ("ndf-milled.json", "milled")] {
+        brdfmill::stages::ndf::NdfFile::read(&p(file)).unwrap_or_else(|e| panic!("{e}"));
+        let g = json(&p(file));
+        assert_eq!(g["density_of"], side, "{file}");
+        assert_eq!(
+            g["observed"], reference,
+            "{file}: the reference is the target's observed distribution"
+        );
+        let grid = |k: &str| -> Vec<f64> { g[k].as_array().unwrap().iter().map(f).collect() };
+        let (d, o) = (grid("density"), grid("observed"));
+        let l1 = d.iter().zip(&o).map(|(a, b)| (a - b).abs()).sum::<f64>() / o.iter().map(|b| b.abs()).sum::<f64>();
+        let n = d.len() as f64;
+        let (md, mo) = (d.iter().sum::<f64>() / n, o.iter().sum::<f64>() / n);
+        let cov =
+            |x: &[f64], mx: f64, y: &[f64], my: f64| x.iter().zip(y).map(|(a, b)| (a - mx) * (b - my)).sum::<f64>();
+        let corr = cov(&d, md, &o, mo) / (cov(&d, md, &d, md) * cov(&o, mo, &o, mo)).sqrt();
+        let (sd, so) = (d.iter().sum::<f64>(), o.iter().sum::<f64>());
+        let kl = |x: f64, m: f64| if x > 0.0 { x * (x / m).log2() } else { 0.0 };
+        let js = d
+            .iter()
+            .zip(&o)
+            .map(|(a, b)| {
+                let (a, b) = (a / sd, b / so);
+                0.5 * kl(a, 0.5 * (a + b)) + 0.5 * kl(b, 0.5 * (a + b))
+            })
+            .sum::<f64>();
+        for (key, ours) in [("ndf_l1", l1), ("ndf_corr", corr), ("ndf_js", js)] {
+            let theirs = f(&m[side][key]);
+            assert!(
+                (ours - theirs).abs() <= 1e-9,
+                "{file}: {key} recomputed {ours}, metrics.json {theirs}"
+            );
+        }
+    }
+    // The report's steepest-facet row quotes the target's mass beyond the cone that metrics.json holds.
+    let beyond = f(&m["measurement"]["target_mass_beyond_cone"]);
+    let row = format!("{:.2}% of the target's distribution lies beyond it", beyond * 100.0);
+    let report_text = std::fs::read_to_string(p("report.html")).unwrap();
+    assert!(
+        report_text.contains(&row),
+        "the report's steepest-facet row does not give metrics.json's {beyond}"
+    );
     // The verdict is the milled surface's, and the summary, the notes and the report say the same.
     let (pass, failed) = verdict_from_numbers(&m["milled"], tol);
     println!(

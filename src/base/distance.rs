@@ -29,13 +29,26 @@ pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
     sab / (saa * sbb).sqrt().max(1e-300)
 }
 
-/// Jensen–Shannon divergence of two non-negative arrays (each normalised to unit sum), bits.
+/// Jensen–Shannon divergence of two non-negative arrays (each normalised to unit sum), bits, in [0, 1].
+///
+/// A density that went through an FFT convolution carries rounding noise of either sign (−1e-17 beside a
+/// cell of 1e-2): a negative cell is no mass and counts as 0, as it does in the normalisation. Without that a
+/// cell with `p < 0 < q`, `m ≤ 0` made `log₂(q/m)` NaN and the sum NaN — which `f64::max(NaN, 0)` turned into
+/// 0 bits, a perfect score for any milled NDF. A non-finite value in either array, or an array with no mass,
+/// gives NaN, which fails every tolerance.
 #[must_use]
 pub fn jensen_shannon(a: &[f64], b: &[f64]) -> f64 {
-    let (sa, sb) = (a.iter().sum::<f64>(), b.iter().sum::<f64>());
+    if a.len() != b.len() || a.iter().chain(b).any(|x| !x.is_finite()) {
+        return f64::NAN;
+    }
+    let mass = |x: &f64| if *x > 0.0 { *x } else { 0.0 };
+    let (sa, sb) = (a.iter().map(mass).sum::<f64>(), b.iter().map(mass).sum::<f64>());
+    if sa <= 0.0 || sb <= 0.0 {
+        return f64::NAN;
+    }
     let mut js = 0.0;
     for (x, y) in a.iter().zip(b) {
-        let (p, q) = (x / sa, y / sb);
+        let (p, q) = (mass(x) / sa, mass(y) / sb);
         let m = 0.5 * (p + q);
         if p > 0.0 {
             js += 0.5 * p * (p / m).log2();
@@ -44,7 +57,8 @@ pub fn jensen_shannon(a: &[f64], b: &[f64]) -> f64 {
             js += 0.5 * q * (q / m).log2();
         }
     }
-    js.max(0.0)
+    // each term is ≥ 0 up to rounding, and the sum ≤ 1 bit; clamp keeps NaN as NaN
+    js.clamp(0.0, 1.0)
 }
 
 /// Variance of the coordinates `x` under the weights `d`.
@@ -64,6 +78,13 @@ mod tests {
         // disjoint supports: JS = 1 bit; identical: 0
         assert!((jensen_shannon(&[1.0, 0.0], &[0.0, 1.0]) - 1.0).abs() < 1e-12);
         assert!(jensen_shannon(&[0.3, 0.7], &[0.3, 0.7]).abs() < 1e-12);
+        // a cell of rounding noise below zero is no mass: disjoint supports still give 1 bit, not NaN or 0
+        assert!((jensen_shannon(&[1.0, -1e-17, 0.0], &[0.0, 1e-18, 1.0]) - 1.0).abs() < 1e-12);
+        assert!((jensen_shannon(&[1.0, 0.0], &[-1e-17, 1.0]) - 1.0).abs() < 1e-12);
+        // no mass, a NaN, or unequal lengths: NaN, which fails a tolerance `js ≤ t`
+        assert!(jensen_shannon(&[0.0, -1.0], &[0.5, 0.5]).is_nan());
+        assert!(jensen_shannon(&[f64::NAN, 1.0], &[0.5, 0.5]).is_nan());
+        assert!(jensen_shannon(&[1.0], &[0.5, 0.5]).is_nan());
         // an affine image correlates perfectly, its negation anti-correlates
         let a = [1.0, 4.0, 2.0, 8.0];
         let b: Vec<f64> = a.iter().map(|x| 3.0 * x - 1.0).collect();

@@ -151,6 +151,8 @@ fn describe(p: &Path) -> String {
         "light.png" => "the simulated part under a moving light",
         "ndf.json" => "target NDF and observed distribution (versioned JSON)",
         "ndf.png" => "observed and target NDF",
+        "ndf-design.json" => "the design tile's NDF the verdict measured, beside the target's (ndf.json's format)",
+        "ndf-milled.json" => "the milled surface's NDF the verdict measured, beside the target's (ndf.json's format)",
         "tile.json" => "facet tile: slopes, heights, stats",
         "tile.npy" => "tile heightfield, mm (NumPy)",
         "tile.png" => "tile shaded relief",

@@ -11,6 +11,8 @@ use super::stages::{design_stage, facets_stage, ndf_stage, program_and_cut, scal
 use super::{JobError, Ready, RegionTarget, StageError};
 use crate::base::heightfield::Heightfield;
 use crate::stages::facets::Tile;
+use crate::stages::ndf::format::DensityOf;
+use crate::stages::ndf::NdfFile;
 use crate::stages::svbrdf;
 use crate::stages::verify::regions::{RegionInput, RegionsInput};
 use crate::stages::verify::{self, report, VerifyInput};
@@ -243,6 +245,17 @@ fn verify_single(
     v.metrics.machine_effects = machine_effects(ready, &program.texts(), &input, &v.design)?;
     v.metrics.notes.extend(ready.toolpath.notes.iter().cloned());
     o.write("wave.png", &v.wave_png.to_png())?;
+    // the grids the verdict measured, so that any of its figures can be recomputed from data
+    let milled_outside = v.metrics.measurement.as_ref().map_or(0.0, |m| m.outside_grid);
+    for (name, what, grid, outside) in [
+        ("ndf-design.json", DensityOf::Design, &v.design, v.design_outside_grid),
+        ("ndf-milled.json", DensityOf::Milled, &v.milled, milled_outside),
+    ] {
+        o.write(
+            name,
+            NdfFile::of_surface(&nd.ndf, what, grid, outside).to_json().as_bytes(),
+        )?;
+    }
     let metrics_json = serde_json::to_string_pretty(&v.metrics).map_err(stage_err("verify"))?;
     o.write("metrics.json", metrics_json.as_bytes())?;
     let mut figures = v.figures;
@@ -253,7 +266,13 @@ fn verify_single(
         title: job.name.clone(),
         verdict: report::Verdict::Single(&v.metrics),
         figures,
-        parameters: super::summary::parameters(ready, &nd.ndf, tile, &sim),
+        parameters: super::summary::parameters(
+            ready,
+            &nd.ndf,
+            tile,
+            &sim,
+            v.metrics.measurement.as_ref().map(|m| m.target_mass_beyond_cone),
+        ),
         program: outcome.setup.clone(),
         artifacts: o.listed(),
     }

@@ -5,8 +5,16 @@ use crate::stages::facets::Tile;
 use crate::stages::ndf::Ndf;
 use crate::stages::simulate::Simulation;
 
-/// The parameters table.
-pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) -> Vec<(String, String)> {
+/// The parameters table. `beyond_cone`: the target's mass beyond the machinable cone as the verdict measured
+/// it (`metrics.json` `measurement.target_mass_beyond_cone`), so that the report and the file give one
+/// figure; None (several targets): the steepest-facet row gives the limit alone.
+pub(super) fn parameters(
+    ready: &Ready,
+    n: &Ndf,
+    tile: &Tile,
+    sim: &Simulation,
+    beyond_cone: Option<f64>,
+) -> Vec<(String, String)> {
     let job = &ready.job;
     let tool = ready
         .machine
@@ -44,12 +52,15 @@ pub(super) fn parameters(ready: &Ready, n: &Ndf, tile: &Tile, sim: &Simulation) 
         ),
         (
             "steepest facet".into(),
-            format!(
-                "{:.1}°, from {}; {:.2}% of the target NDF's mass lies beyond it (dropped from the facets)",
-                job.facets.max_slope_deg,
-                ready.slope_cap_from,
-                tile.sampling.steep_mass * 100.0
-            ),
+            match beyond_cone {
+                Some(beyond) => format!(
+                    "{:.1}°, from {}; {:.2}% of the target's distribution lies beyond it, where no facet can draw it",
+                    job.facets.max_slope_deg,
+                    ready.slope_cap_from,
+                    beyond * 100.0
+                ),
+                None => format!("{:.1}°, from {}", job.facets.max_slope_deg, ready.slope_cap_from),
+            },
         ),
         ("relief".into(), relief_line(job, tile)),
         (
@@ -109,7 +120,7 @@ pub(super) fn region_parameters(
         "steps between facets",
         "arrangement energy",
     ];
-    let mut rows: Vec<(String, String)> = parameters(ready, ndfs[0], &tiles[0], sim)
+    let mut rows: Vec<(String, String)> = parameters(ready, ndfs[0], &tiles[0], sim, None)
         .into_iter()
         .filter(|(k, _)| !PER_TARGET.contains(&k.as_str()))
         .collect();

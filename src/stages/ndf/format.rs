@@ -16,8 +16,19 @@
 //!   "config": {...}   the NdfConfig used
 //!   "mass_beyond_grid": 0.0   fraction of the target's half-angle mass outside the grid (left out of both
 //!                             grids; absent in older files, read as 0)
+//!   "density_of": "target"    what "density" holds (absent in older files, read as "target"):
+//!                             "target"  the deconvolved P22 the facets sample (ndf.json);
+//!                             "design"  the design tile's facet slopes ⊛ the base lobe (ndf-design.json);
+//!                             "milled"  the simulated cut's slopes ⊛ the polish lobe (ndf-milled.json)
+//!   "density_outside_grid": 0.0   with "design" / "milled": the fraction of the surface's slopes beyond the
+//!                             grid (left out of "density"); absent with "target"
 //! }
 //! ```
+//!
+//! `ndf-design.json` and `ndf-milled.json` hold exactly the grids the verdict measures: their "density"
+//! against their "observed" (the target's observed distribution, the verdict's reference) gives
+//! `metrics.json`'s `design` and `milled` figures — relative L1 `∑|d − o| / ∑o`, the Pearson correlation of
+//! the cells and the Jensen–Shannon divergence in bits, over the whole grid.
 //!
 //! Readers check the version, the lengths, that every value is finite and non-negative, and that both
 //! grids have unit mass (within 1e-3).
@@ -99,6 +110,25 @@ pub struct NdfFile {
     /// Fraction of the target's half-angle mass outside the slope grid (left out of both distributions).
     #[serde(default)]
     pub mass_beyond_grid: f64,
+    /// What `density` holds.
+    #[serde(default)]
+    pub density_of: DensityOf,
+    /// With a surface's density (`design`, `milled`): the fraction of its slopes beyond the grid.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub density_outside_grid: Option<f64>,
+}
+
+/// What an NDF file's `density` holds (`"density_of"`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum DensityOf {
+    /// The deconvolved target `P22` the facets sample (`ndf.json`).
+    #[default]
+    Target,
+    /// The design tile's facet slopes convolved with the base lobe (`ndf-design.json`).
+    Design,
+    /// The simulated cut's slopes convolved with the polish lobe (`ndf-milled.json`).
+    Milled,
 }
 
 /// An `ndf.json` that cannot be used.
@@ -136,11 +166,27 @@ impl From<&Ndf> for NdfFile {
             material: n.material,
             config: n.config,
             mass_beyond_grid: n.mass_beyond_grid,
+            density_of: DensityOf::Target,
+            density_outside_grid: None,
         }
     }
 }
 
 impl NdfFile {
+    /// The file of a surface's slope distribution measured against `n`'s target (`ndf-design.json`,
+    /// `ndf-milled.json`): `density` is `surface` on `n`'s grid, `observed` the target's observed
+    /// distribution the verdict compares it with, the rest as in `n`'s `ndf.json`; `outside_grid` is the
+    /// fraction of the surface's slopes beyond the grid.
+    pub fn of_surface(n: &Ndf, what: DensityOf, surface: &SlopeGrid, outside_grid: f64) -> Self {
+        let mut f = Self::from(n);
+        debug_assert_eq!(surface.domain, f.domain, "a surface's NDF on its target's grid");
+        f.density = surface.density.clone();
+        f.stats = surface.stats();
+        f.density_of = what;
+        f.density_outside_grid = Some(outside_grid);
+        f
+    }
+
     /// The slope domain.
     pub fn domain(&self) -> SlopeDomain {
         self.domain

@@ -39,7 +39,10 @@ pub struct Measurement {
     pub scallops: String,
     /// The machinable cone the slope variances are compared within, degrees.
     pub cone_deg: f64,
-    /// The target's observed mass beyond that cone, fraction of 1 (it counts against L1).
+    /// The fraction of the target's half-angle mass beyond that cone, which no facet draws:
+    /// `g + (1 − g)·b`, `g` the mass beyond the NDF grid (`ndf.json` `mass_beyond_grid`, steeper than any cell)
+    /// and `b` the observed grid's mass outside the cone. The part inside the grid counts against the L1,
+    /// correlation and Jensen–Shannon figures; the report's steepest-facet row quotes this figure.
     pub target_mass_beyond_cone: f64,
     /// Fraction of the milled slopes beyond the NDF grid (steep walls), left out of the NDF.
     pub outside_grid: f64,

@@ -156,6 +156,9 @@ pub struct VerifyOutput {
     pub design: SlopeGrid,
     /// The milled surface's NDF (⊛ the polish lobe).
     pub milled: SlopeGrid,
+    /// The fraction of the design tile's facet slopes beyond the NDF grid (the milled surface's is
+    /// `metrics.measurement.outside_grid`).
+    pub design_outside_grid: f64,
     /// `wave.png`: the wave and geometric BRDF of a milled patch.
     pub wave_png: Canvas,
     /// The report's figures of this stage, in order (NDFs, BRDF slices, rendered preview, wave optics).
@@ -169,7 +172,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
     let n = input.ndf;
     let domain = n.config.domain();
     let tol = cfg.tolerances;
-    let design = design_ndf(input.tile, input.base, domain);
+    let (design, design_outside) = design_ndf(input.tile, input.base, domain);
     let (milled, outside, measurement) = milled_ndf(cfg, input)?;
     let cone_tan = input.cone_deg.to_radians().tan();
     let mut design_m = metrics::measure(&n.observed, &design, input.target, &cfg.incident_deg, &tol, cone_tan);
@@ -238,21 +241,8 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
     if let Some(w) = crate::stages::ndf::grid_warning(input.ndf) {
         notes.push(format!("{w}."));
     }
-    if input.tile.sampling.steep_mass > 1e-4 {
-        notes.push(format!(
-            "{:.2}% of the target NDF's mass lies beyond the machinable limit of {}° and was dropped from the facets{}",
-            input.tile.sampling.steep_mass * 100.0,
-            input.tile.config.max_slope_deg,
-            if input.tile.sampling.steep_mass > 0.01 {
-                // the limit is the steepest facet the relief budget allows: atan(relief / (√2·facet))
-                format!(
-                    ": the milled lobe lacks that tail. The limit is `facets.max_slope_deg` (unless the job sets it, the steepest {} mm facet the relief budget allows); smaller facets (`facets.facet_mm`) or a taller budget (a tool with longer flutes, or `facets.max_relief_mm`) raise it, up to the NDF grid's edge (`ndf.max_angle_deg`) and what the ball can reach.",
-                    input.tile.config.facet_mm
-                )
-            } else {
-                ".".to_string()
-            }
-        ));
+    if let Some(note) = beyond_cone_note(input, &measurement) {
+        notes.push(note);
     }
     if !measurement.window.whole() {
         notes.push(format!(
@@ -318,6 +308,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         metrics,
         design,
         milled,
+        design_outside_grid: design_outside,
         wave_png,
         figures,
     })
@@ -409,7 +400,11 @@ fn milled_ndf(cfg: &VerifyConfig, input: &VerifyInput) -> Result<(SlopeGrid, f64
     };
     let milled = normalised(lobe.convolve(&raw));
     let cone_tan = input.cone_deg.to_radians().tan();
-    let beyond = 1.0 - n.observed.cut_to_cone(cone_tan).mass() / n.observed.mass().max(1e-300);
+    // the target's mass the facets cannot draw: beyond the grid (steeper than any of its cells; the facets
+    // sample the grid) or inside it beyond the cone
+    let in_grid = 1.0 - n.observed.cut_to_cone(cone_tan).mass() / n.observed.mass().max(1e-300);
+    let g = n.mass_beyond_grid.clamp(0.0, 1.0);
+    let beyond = g + (1.0 - g) * in_grid.clamp(0.0, 1.0);
     let measurement = Measurement {
         window: win,
         margin_cells: margin,
@@ -420,6 +415,32 @@ fn milled_ndf(cfg: &VerifyConfig, input: &VerifyInput) -> Result<(SlopeGrid, f64
         outside_grid: outside,
     };
     Ok((milled, outside, measurement))
+}
+
+/// The target's mass beyond the machinable cone, when it matters (over 0.01%): the milled lobe lacks that
+/// tail. Quotes `measurement.target_mass_beyond_cone`, the figure `metrics.json` and the report's
+/// steepest-facet row give. (The facets' own `steep_mass` is no guide in a job: the design loop hands them
+/// the NDF already restricted to the cone, so nothing is left for them to drop.)
+fn beyond_cone_note(input: &VerifyInput, measurement: &Measurement) -> Option<String> {
+    let beyond = measurement.target_mass_beyond_cone;
+    if beyond <= 1e-4 {
+        return None;
+    }
+    let mut s = format!(
+        "{:.2}% of the target's distribution lies beyond the machinable limit of {:.1}°, where no facet can draw it",
+        beyond * 100.0,
+        measurement.cone_deg
+    );
+    if beyond > 0.01 {
+        // the limit is the steepest facet the relief budget allows: atan(relief / (√2·facet))
+        s += &format!(
+            ": the milled lobe lacks that tail. The limit is `facets.max_slope_deg` (unless the job sets it, the steepest {} mm facet the relief budget allows); smaller facets (`facets.facet_mm`) or a taller budget (a tool with longer flutes, or `facets.max_relief_mm`) raise it, up to the NDF grid's edge (`ndf.max_angle_deg`) and what the ball can reach.",
+            input.tile.config.facet_mm
+        );
+    } else {
+        s.push('.');
+    }
+    Some(s)
 }
 
 /// The design loop's convergence: each round's as-milled model variance ratios, the tolerance band, and the
@@ -631,14 +652,19 @@ fn wave_patch(cfg: &VerifyConfig, input: &VerifyInput, margin: usize) -> Result<
 }
 
 /// The design tile's NDF: its facets' slopes (each facet's area alike) convolved with the base lobe.
-pub(super) fn design_ndf(tile: &Tile, base: Option<&Kernel>, domain: crate::base::slope::SlopeDomain) -> SlopeGrid {
+pub(super) fn design_ndf(
+    tile: &Tile,
+    base: Option<&Kernel>,
+    domain: crate::base::slope::SlopeDomain,
+) -> (SlopeGrid, f64) {
     let a = &tile.arrangement;
     let facet_slopes: Vec<(f64, f64)> = a.p.iter().copied().zip(a.q.iter().copied()).collect();
-    let (raw, _) = surface::ndf_of_slopes(&facet_slopes, domain);
-    match base {
+    let (raw, outside) = surface::ndf_of_slopes(&facet_slopes, domain);
+    let grid = match base {
         Some(k) => normalised(k.convolve(&raw)),
         None => raw,
-    }
+    };
+    (grid, outside)
 }
 
 fn normalised(mut g: SlopeGrid) -> SlopeGrid {
