@@ -38,6 +38,11 @@ fn grids(case: &str) -> (SlopeGrid, SlopeGrid) {
     (SlopeGrid { domain, density: a }, SlopeGrid { domain, density: b })
 }
 
+/// The peers' figures, `metrics.json`.
+fn peers() -> serde_json::Value {
+    serde_json::from_slice(&std::fs::read(dir().join("metrics.json")).unwrap()).expect("metrics.json")
+}
+
 fn close(ours: f64, theirs: f64, what: &str) {
     assert!(
         (ours - theirs).abs() <= 1e-10 * theirs.abs().max(1e-3),
@@ -47,8 +52,7 @@ fn close(ours: f64, theirs: f64, what: &str) {
 
 #[test]
 fn the_verdicts_distances_agree_with_scipy_and_numpy() {
-    let peers: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir().join("metrics.json")).unwrap()).expect("metrics.json");
+    let peers = peers();
     let cases = peers["cases"].as_object().expect("cases");
     assert_eq!(cases.len(), 3);
     for (case, want) in cases {
@@ -84,8 +88,7 @@ fn the_verdicts_distances_agree_with_scipy_and_numpy() {
 /// The figures differ enough between the cases that a metric returning a constant (0 bits, say) fails.
 #[test]
 fn the_peer_cases_span_the_range() {
-    let peers: serde_json::Value =
-        serde_json::from_slice(&std::fs::read(dir().join("metrics.json")).unwrap()).expect("metrics.json");
+    let peers = peers();
     let js: Vec<f64> = ["smooth", "sparse", "spiky"]
         .iter()
         .map(|c| peers["cases"][c]["js_bits"].as_f64().unwrap())

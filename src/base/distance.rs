@@ -31,11 +31,10 @@ pub fn correlation(a: &[f64], b: &[f64]) -> f64 {
 
 /// Jensen–Shannon divergence of two non-negative arrays (each normalised to unit sum), bits, in [0, 1].
 ///
-/// A density that went through an FFT convolution carries rounding noise of either sign (−1e-17 beside a
-/// cell of 1e-2): a negative cell is no mass and counts as 0, as it does in the normalisation. Without that a
-/// cell with `p < 0 < q`, `m ≤ 0` made `log₂(q/m)` NaN and the sum NaN — which `f64::max(NaN, 0)` turned into
-/// 0 bits, a perfect score for any milled NDF. A non-finite value in either array, or an array with no mass,
-/// gives NaN, which fails every tolerance.
+/// A negative cell (rounding noise of an unclamped FFT convolution, −1e-17 beside a cell of 1e-2) is no mass
+/// and counts as 0, in the sums and in the terms. A non-finite value in either array, an array with no mass or
+/// arrays of unequal length give NaN, which fails every tolerance: before, such a NaN sum went through
+/// `f64::max(NaN, 0)` and read as 0 bits, a perfect score.
 #[must_use]
 pub fn jensen_shannon(a: &[f64], b: &[f64]) -> f64 {
     if a.len() != b.len() || a.iter().chain(b).any(|x| !x.is_finite()) {
