@@ -11,7 +11,10 @@
 //! from `A` on the resolution `q` — and accepted only if the arc a controller draws from those numbers (the
 //! radius `|A − C|`, less the difference to `|B − C|`) stays within `[z_k, z_k + tol + q]` at every raw
 //! point and above the straight blocks' chords midway between raw points, both ends lie on the same side of the centre's height (no vertical tangent inside: the arc is a
-//! function of the pass coordinate) and it replaces at least [`MIN_BLOCKS`] blocks. Greedy: from `A`, ends
+//! function of the pass coordinate) and it replaces at least [`MIN_BLOCKS`] blocks. The least sagitta's arc
+//! touches a raw point, so a written centre whose radii to `A` and `B` differ at all passes below it there;
+//! the arc is tried again with `σ` raised by `q/8`, `q/4` and `q/2` ([`SIGMA_RAISES`]) before it is given up
+//! (without them a dome of a curved facet, or any gentle convex run, was written as one 5 µm line per CL point). Greedy: from `A`, ends
 //! `MIN_BLOCKS·2^k` vertices on are probed and the farthest passing end is refined by bisection; else the
 //! next line.
 
@@ -22,8 +25,10 @@ use crate::gcode::moves::{Arc, Plane, P3};
 /// The fewest line blocks an arc must replace.
 pub const MIN_BLOCKS: usize = 3;
 
-/// The largest radius fitted, mm (beyond it the arc is a line to the controller's arithmetic).
-pub const MAX_RADIUS_MM: f64 = 100.0;
+/// The largest radius fitted, mm: GRBL's single-precision arithmetic places a centre 1 m away to about
+/// 0.06 µm (2⁻²⁴ of it), well inside the machines' 1.25 µm step; a curved facet's dome is often 20–200 mm
+/// (was 100 mm, which left the flattest domes as 5 µm lines).
+pub const MAX_RADIUS_MM: f64 = 1000.0;
 
 /// The most raw points one arc may span (bounds the O(n²) extension).
 const MAX_SPAN: usize = 4000;
@@ -150,6 +155,41 @@ fn arc(raw: &[P3], ia: usize, ib: usize, tol: f64, q: f64, plane: Plane) -> Opti
         }
     }
     if !sig.is_finite() || sig.abs() >= l / 2.0 {
+        return None;
+    }
+    // The least sagitta's arc touches a raw point, so a written centre whose radii to A and B differ by any
+    // `dr` would pass below it: the arc is also tried raised by fractions of the resolution (room the band
+    // `[z_k, z_k + tol + q]` keeps above the points).
+    SIGMA_RAISES.iter().find_map(|&raise| {
+        let sig = sig + raise * q;
+        quantised_arc(raw, ia, ib, tol, q, plane, (a3, b3), sgn, sig)
+    })
+}
+
+/// Raises of the least sagitta tried, in units of the resolution `q`.
+const SIGMA_RAISES: [f64; 4] = [0.0, 0.125, 0.25, 0.5];
+
+/// The arc of sagitta `sig` from `ends.0` to `ends.1` (quantised) with its centre on the resolution, if the
+/// arc a controller draws from those numbers passes over every raw point between within the band.
+#[allow(clippy::too_many_arguments)]
+fn quantised_arc(
+    raw: &[P3],
+    ia: usize,
+    ib: usize,
+    tol: f64,
+    q: f64,
+    plane: Plane,
+    (a3, b3): (P3, P3),
+    sgn: f64,
+    sig: f64,
+) -> Option<Arc> {
+    let h = if plane == Plane::Zx { 0 } else { 1 };
+    let (a, b) = ([0.0, a3[2]], [sgn * (b3[h] - a3[h]), b3[2]]);
+    let d = [b[0] - a[0], b[1] - a[1]];
+    let l = d[0].hypot(d[1]);
+    let e = [d[0] / l, d[1] / l];
+    let nrm = [-e[1], e[0]];
+    if sig.abs() >= l / 2.0 {
         return None;
     }
     let r = (l * l / 4.0 + sig * sig) / (2.0 * sig.abs());
@@ -301,6 +341,43 @@ mod tests {
                     "below the CL at x {}: {} < {}",
                     pt[0],
                     z,
+                    pt[2]
+                );
+                assert!(
+                    z <= pt[2] + tol + q + along + 1e-9,
+                    "more than tol above at x {}",
+                    pt[0]
+                );
+            }
+        }
+    }
+
+    /// A curved facet's dome (a parabola of curvature κ, a circle to within `κ³x⁴/8`, well under a
+    /// nanometre over its millimetre) on GRBL's 1.25 µm grid: one arc or a few, never a 5 µm line per CL
+    /// point, and never below the points. The least sagitta's arc touches a point, so with any radius
+    /// mismatch of the rounded centre it failed: this is what the raised sagittas are for.
+    #[test]
+    fn a_dome_becomes_a_few_arcs_on_a_coarse_grid() {
+        let (p, q, tol) = (0.005, 0.00125, 0.000625);
+        for (kappa, slope, reverse) in [(0.05, 0.0, false), (0.1, 0.1, true), (0.18, -0.15, false)] {
+            let mut raw: Vec<P3> = (0..160)
+                .map(|i| {
+                    let x = i as f64 * p;
+                    [1.0 + x, 0.3, -0.3 + slope * x - 0.5 * kappa * x * x]
+                })
+                .collect();
+            if reverse {
+                raw.reverse();
+            }
+            let pieces = fit(&raw, tol, q, pass_plane(&raw));
+            assert!(pieces.len() <= 3, "κ {kappa}: {} pieces", pieces.len());
+            let along = slope.abs().max(0.2) * q / 2.0;
+            for pt in &raw[1..raw.len() - 1] {
+                let z = drawn(raw[0], &pieces, pt[0], q);
+                assert!(
+                    z >= pt[2] - along - 1e-9,
+                    "below the CL at x {}: {z} < {}",
+                    pt[0],
                     pt[2]
                 );
                 assert!(
