@@ -26,10 +26,27 @@ use serde::{Deserialize, Serialize};
 /// (the golden-ratio increment), so that the candidates of neighbouring job seeds do not overlap.
 const SEED_STRIDE: u64 = 0x9E37_79B9_7F4A_7C15;
 
+/// What the design draws the target with (`design.method`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum DesignMethod {
+    /// Weyrich et al.'s flat facets: `N` facets are `N` normals, each blurred only by the base lobe.
+    FlatFacets,
+    /// Each facet a dome whose normals sweep its own Voronoi cell of the target (`facets::curved`): the
+    /// facets draw a continuous distribution.
+    CurvedFacets,
+}
+
+/// Slopes per facet and axis over which a curved facet's own distribution is counted (16² = 256 per facet:
+/// finer than the NDF grid's cell across the smallest Voronoi cell of the default job).
+pub const DESIGN_SLOPES_PER_AXIS: usize = 16;
+
 /// `[design]` of a job.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DesignConfig {
+    /// Flat or curved facets.
+    pub method: DesignMethod,
     /// Rounds at most (1: the facets stage once, no correction).
     pub rounds: usize,
     /// Gain γ of the multiplicative correction (1: a full Richardson–Lucy step).
@@ -47,6 +64,7 @@ pub struct DesignConfig {
 impl Default for DesignConfig {
     fn default() -> Self {
         Self {
+            method: DesignMethod::FlatFacets,
             rounds: 4,
             gain: 1.0,
             stop_fraction: 0.2,
@@ -192,7 +210,10 @@ pub fn run(
         .map(|k| fcfg.seed.wrapping_add(k.wrapping_mul(SEED_STRIDE)))
         .collect();
     // the facets' slopes do not depend on the seed: sampled once, arranged from each seed
-    let sites = facets::sites(fcfg, &aim)?;
+    let sites = match cfg.method {
+        DesignMethod::FlatFacets => facets::sites(fcfg, &aim)?,
+        DesignMethod::CurvedFacets => facets::sites(fcfg, &aim)?.curved(),
+    };
     let candidates: Vec<(Tile, Round)> = seeds
         .par_iter()
         .map(|&seed| {
@@ -265,13 +286,7 @@ fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale
     let (raw, _) = surface::ndf_of_slopes(&slopes, domain);
     let mut milled = input.scallop.convolve(&raw);
     milled.normalise();
-    let facet_slopes: Vec<(f64, f64)> = tile
-        .arrangement
-        .p
-        .iter()
-        .copied()
-        .zip(tile.arrangement.q.iter().copied())
-        .collect();
+    let facet_slopes = facets::curved::facet_slopes(&tile.arrangement, tile.config.facet_mm, DESIGN_SLOPES_PER_AXIS);
     let (design_raw, _) = surface::ndf_of_slopes(&facet_slopes, domain);
     let mut design = match input.base {
         Some(k) => k.convolve(&design_raw),

@@ -87,6 +87,10 @@ pub struct Arrangement {
     pub q: Vec<f64>,
     /// Which input facet sits at each position.
     pub index: Vec<usize>,
+    /// Curved facets: each position's curvature `H = [Hxx, Hxy, Hyy]`, 1/mm, so that the facet's slope at
+    /// an offset `d` from its centre is `(p, q) − H d` (a dome: `H` is positive semi-definite). Empty: flat
+    /// facets. Set after the annealing (which arranges the facets by their centre slopes).
+    pub curvature_per_mm: Vec<[f64; 3]>,
     /// Valley penalty `w_v` (absolute, slope² units).
     pub w_v: f64,
     /// Weight of the step term S (0 unless set by [`Arrangement::set_weights`]).
@@ -114,6 +118,7 @@ impl Arrangement {
             p: slopes.iter().map(|s| s.0).collect(),
             q: slopes.iter().map(|s| s.1).collect(),
             index: (0..w * h).collect(),
+            curvature_per_mm: vec![],
             w_v,
             step_weight: 0.0,
             relief_weight: 0.0,

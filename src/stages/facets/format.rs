@@ -59,6 +59,10 @@ pub struct FacetsRecord {
     pub z_mm: Vec<f64>,
     /// Index of each facet in the sampled set.
     pub index: Vec<usize>,
+    /// Curved facets (`design.method = "curved-facets"`): each facet's curvature `[Hxx, Hxy, Hyy]`, 1/mm,
+    /// its slope at an offset `d` from the centre being `(p, q) − H d`; absent for flat facets.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub curvature_per_mm: Vec<[f64; 3]>,
 }
 
 /// The heightfield's description (its data is the `.npy` file).
@@ -182,6 +186,7 @@ impl TileFile {
                 q: a.q.clone(),
                 z_mm: tile.z_mm.clone(),
                 index: a.index.clone(),
+                curvature_per_mm: a.curvature_per_mm.clone(),
             },
             heightfield: HeightfieldRecord {
                 file: npy_name.into(),

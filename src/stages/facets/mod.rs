@@ -18,6 +18,7 @@
 //! ```
 
 pub(crate) mod arrange;
+pub mod curved;
 pub mod format;
 pub(crate) mod poisson;
 pub(crate) mod relief;
@@ -395,6 +396,21 @@ pub struct Sites {
     ks_halton: f64,
     ks_cvt: f64,
     lloyd: sampling::LloydReport,
+    /// Curved facets: each site's dome curvature (`curved::curvature`), 1/mm; empty for flat facets.
+    curvature: Vec<[f64; 3]>,
+}
+
+impl Sites {
+    /// The same sites as curved facets: each a dome whose slopes sweep the site's Voronoi cell of the
+    /// density with the cell's own second moment ([`curved`]).
+    pub fn curved(mut self) -> Self {
+        let moments = curved::cell_moments(&self.density, &self.sites);
+        self.curvature = moments
+            .into_iter()
+            .map(|m| curved::curvature(m, self.config.facet_mm))
+            .collect();
+        self
+    }
 }
 
 /// The facets' slopes for `cfg` (its seed and annealing play no part).
@@ -429,6 +445,7 @@ pub fn sites(cfg: &FacetsConfig, ndf: &SlopeGrid) -> Result<Sites, FacetsError> 
         ks_halton,
         ks_cvt,
         lloyd,
+        curvature: vec![],
     })
 }
 
@@ -475,6 +492,9 @@ pub fn run_from(cfg: &FacetsConfig, sites: &Sites) -> Result<Tile, FacetsError> 
     let w_v = cfg.anneal.valley_weight * 0.5 * (slope_stats.cov[0][0] + slope_stats.cov[1][1]);
     let mut arrangement = Arrangement::new(cfg.facets_x, cfg.facets_y, &sites_now, w_v);
     let anneal = arrange::anneal(&mut arrangement, &cfg.anneal, &mut rng);
+    if !sites.curvature.is_empty() {
+        arrangement.curvature_per_mm = arrangement.index.iter().map(|&k| sites.curvature[k]).collect();
+    }
 
     // 3. integration and rasterisation
     let (z, heightfield, seams) = integrate(&arrangement, cfg);
@@ -501,23 +521,26 @@ pub fn run_from(cfg: &FacetsConfig, sites: &Sites) -> Result<Tile, FacetsError> 
 }
 
 /// Facet heights by periodic Poisson integration, the rasterised heightfield (top at z = 0) and the steps.
+/// Curved facets meet at their edges' midpoints when their centre heights also carry the difference of the
+/// two domes' sags there ([`curved::edge_sag_differences`], added to the edge gradients).
 fn integrate(arrangement: &Arrangement, cfg: &FacetsConfig) -> (Vec<f64>, Heightfield, SeamStats) {
-    let (w, h) = (cfg.facets_x, cfg.facets_y);
+    let (w, h, a) = (cfg.facets_x, cfg.facets_y, cfg.facet_mm);
     let mut z = vec![0.0; w * h];
-    PoissonSolver::new(w, h).facet_heights(&arrangement.p, &arrangement.q, cfg.facet_mm, &mut z);
+    let (mut gx, mut gy) = poisson::edge_gradients(&arrangement.p, &arrangement.q, w, h);
+    let (cx, cy) = curved::edge_sag_differences(&arrangement.curvature_per_mm, w, h, a);
+    gx.iter_mut().zip(&cx).for_each(|(g, c)| *g += c / a);
+    gy.iter_mut().zip(&cy).for_each(|(g, c)| *g += c / a);
+    PoissonSolver::new(w, h).integrate_edge_gradients(&gx, &gy, a, &mut z);
     if cfg.max_relief_mm > 0.0 {
         // `None`: one facet alone is taller than the budget; the toolpath's depth check then refuses it
-        let _ = relief::bound(
-            &arrangement.p,
-            &arrangement.q,
-            &mut z,
-            w,
-            h,
-            cfg.facet_mm,
-            cfg.max_relief_mm,
-        );
+        // (the bound counts the facets' planes: a dome's corners sit lower by its sag, within the check's
+        // reading of the heightfield itself)
+        let _ = relief::bound(&arrangement.p, &arrangement.q, &mut z, w, h, a, cfg.max_relief_mm);
     }
-    let (sx, sy) = poisson::edge_steps(&arrangement.p, &arrangement.q, &z, w, h, cfg.facet_mm);
+    // the steps: the signed jump between the planes' edge midpoints, less the sags' difference
+    let (sx, sy) = poisson::signed_edge_steps(&arrangement.p, &arrangement.q, &z, w, h, a);
+    let sx: Vec<f64> = sx.iter().zip(&cx).map(|(s, c)| (s - c).abs()).collect();
+    let sy: Vec<f64> = sy.iter().zip(&cy).map(|(s, c)| (s - c).abs()).collect();
     let seams = seam_stats(&sx, &sy, w, h);
     let mut heightfield = rasterise(arrangement, &z, cfg);
     let top = heightfield.range().1;
@@ -533,6 +556,11 @@ pub fn rescaled(tile: &Tile, scale: [f64; 2]) -> Tile {
     let mut arrangement = tile.arrangement.clone();
     arrangement.p.iter_mut().for_each(|p| *p *= scale[0]);
     arrangement.q.iter_mut().for_each(|q| *q *= scale[1]);
+    let a = tile.config.facet_mm;
+    arrangement
+        .curvature_per_mm
+        .iter_mut()
+        .for_each(|h| *h = curved::rescaled(*h, scale, a));
     let (z, heightfield, seams) = integrate(&arrangement, &tile.config);
     let sites: Vec<(f64, f64)> = arrangement
         .p
@@ -593,7 +621,8 @@ fn seam_stats(sx: &[f64], sy: &[f64], w: usize, h: usize) -> SeamStats {
     }
 }
 
-/// Rasterise the facet planes: sample `(i, j)` of facet `(fx, fy)` gets `z + p (x − xc) + q (y − yc)`.
+/// Rasterise the facets: sample `(i, j)` of facet `(fx, fy)` gets `z + p (x − xc) + q (y − yc)`, less a
+/// curved facet's sag `½ dᵀ H d` at `d = (x − xc, y − yc)`.
 pub fn rasterise(a: &Arrangement, z: &[f64], cfg: &FacetsConfig) -> Heightfield {
     use rayon::prelude::*;
     let m = cfg.samples_per_facet();
@@ -608,6 +637,9 @@ pub fn rasterise(a: &Arrangement, z: &[f64], cfg: &FacetsConfig) -> Heightfield 
             let dx = ((i % m) as f64 + 0.5) * pitch - 0.5 * cfg.facet_mm;
             let k = fy * a.w + fx;
             *v = z[k] + a.p[k] * dx + a.q[k] * dy;
+            if let Some(h) = a.curvature_per_mm.get(k) {
+                *v += curved::sag(h, dx, dy);
+            }
         }
     });
     hf

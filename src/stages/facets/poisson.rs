@@ -94,7 +94,15 @@ pub fn edge_gradients(p: &[f64], q: &[f64], nx: usize, ny: usize) -> (Vec<f64>, 
 
 /// Steps at the facet edges of an arrangement with heights `z`: `(x-edges, y-edges)`, each the height jump
 /// between the two facet planes at the midpoint of their shared edge (absolute value).
+#[cfg(test)]
 pub fn edge_steps(p: &[f64], q: &[f64], z: &[f64], nx: usize, ny: usize, facet: f64) -> (Vec<f64>, Vec<f64>) {
+    let (mut sx, mut sy) = signed_edge_steps(p, q, z, nx, ny, facet);
+    sx.iter_mut().chain(sy.iter_mut()).for_each(|s| *s = s.abs());
+    (sx, sy)
+}
+
+/// [`edge_steps`] with their signs: the far facet's edge midpoint (right, up) minus the near one's.
+pub fn signed_edge_steps(p: &[f64], q: &[f64], z: &[f64], nx: usize, ny: usize, facet: f64) -> (Vec<f64>, Vec<f64>) {
     let mut sx = vec![0.0; nx * ny];
     let mut sy = vec![0.0; nx * ny];
     for y in 0..ny {
@@ -102,8 +110,8 @@ pub fn edge_steps(p: &[f64], q: &[f64], z: &[f64], nx: usize, ny: usize, facet: 
             let k = y * nx + x;
             let r = y * nx + (x + 1) % nx;
             let u = ((y + 1) % ny) * nx + x;
-            sx[k] = ((z[r] - 0.5 * facet * p[r]) - (z[k] + 0.5 * facet * p[k])).abs();
-            sy[k] = ((z[u] - 0.5 * facet * q[u]) - (z[k] + 0.5 * facet * q[k])).abs();
+            sx[k] = (z[r] - 0.5 * facet * p[r]) - (z[k] + 0.5 * facet * p[k]);
+            sy[k] = (z[u] - 0.5 * facet * q[u]) - (z[k] + 0.5 * facet * q[k]);
         }
     }
     (sx, sy)

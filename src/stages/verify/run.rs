@@ -651,14 +651,18 @@ fn wave_patch(cfg: &VerifyConfig, input: &VerifyInput, margin: usize) -> Result<
     ))
 }
 
-/// The design tile's NDF: its facets' slopes (each facet's area alike) convolved with the base lobe.
+/// The design tile's NDF: its facets' slopes (each facet's area alike; a curved facet's over its area)
+/// convolved with the base lobe.
 pub(super) fn design_ndf(
     tile: &Tile,
     base: Option<&Kernel>,
     domain: crate::base::slope::SlopeDomain,
 ) -> (SlopeGrid, f64) {
-    let a = &tile.arrangement;
-    let facet_slopes: Vec<(f64, f64)> = a.p.iter().copied().zip(a.q.iter().copied()).collect();
+    let facet_slopes = crate::stages::facets::curved::facet_slopes(
+        &tile.arrangement,
+        tile.config.facet_mm,
+        crate::stages::design::DESIGN_SLOPES_PER_AXIS,
+    );
     let (raw, outside) = surface::ndf_of_slopes(&facet_slopes, domain);
     let grid = match base {
         Some(k) => normalised(k.convolve(&raw)),
