@@ -65,6 +65,59 @@ pub fn next_scale(history: &[([f64; 2], [f64; 2])], gain: f64) -> [f64; 2] {
     [axis(0), axis(1)]
 }
 
+/// The aim corrected cell by cell (a Richardson–Lucy step through the scallop lobe `K`):
+///
+/// `A'(s) = A(s) · [ (K ⊛ r)(s) / (K ⊛ 1)(s) ]^γ`,  `r = T_obs / M` clamped to `[1/RATIO_LIMIT, RATIO_LIMIT]`,
+///
+/// with `T_obs` the target as observed (with the base lobe), `M` the round's as-milled model, both floored
+/// at [`RATIO_FLOOR`] of `T_obs`'s peak so that empty cells do not divide; zero beyond `cone_tan`,
+/// normalised. Where the model has too much mass (the fillets' slopes), the aim loses some; where too little
+/// (a sharp peak the ball's fillets spread), it gains. The normalised convolution keeps the ratio's mean at the
+/// grid's edges.
+pub fn reweighted(
+    aim: &SlopeGrid,
+    observed: &SlopeGrid,
+    model: &SlopeGrid,
+    kernel: &crate::stages::ndf::Kernel,
+    gain: f64,
+    cone_tan: f64,
+) -> SlopeGrid {
+    let floor = RATIO_FLOOR * observed.density.iter().copied().fold(0.0, f64::max);
+    let ratio = SlopeGrid {
+        domain: aim.domain,
+        density: observed
+            .density
+            .iter()
+            .zip(&model.density)
+            .map(|(t, m)| (t.max(floor) / m.max(floor)).clamp(1.0 / RATIO_LIMIT, RATIO_LIMIT))
+            .collect(),
+    };
+    let ones = SlopeGrid {
+        domain: aim.domain,
+        density: vec![1.0; aim.density.len()],
+    };
+    let (kr, k1) = (kernel.convolve(&ratio), kernel.convolve(&ones));
+    let d = aim.domain;
+    let mut g = SlopeGrid::from_fn(d, |_, _| 0.0);
+    for j in 0..d.ny {
+        for i in 0..d.nx {
+            let k = j * d.nx + i;
+            if d.p_at(i).hypot(d.q_at(j)) > cone_tan || k1.density[k] <= 0.0 {
+                continue;
+            }
+            g.density[k] = aim.density[k] * (kr.density[k] / k1.density[k]).powf(gain);
+        }
+    }
+    g.normalise();
+    g
+}
+
+/// Below this fraction of the observed target's peak, a cell's density counts as this floor in the ratio.
+pub const RATIO_FLOOR: f64 = 1e-3;
+
+/// The most one round may multiply or divide a cell of the aim by.
+pub const RATIO_LIMIT: f64 = 2.0;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -100,5 +153,45 @@ mod tests {
         // the model is exactly α c² + β, so the secant lands on it at the third round
         let r = model(scale[0]) / target_var;
         assert!((r - 1.0).abs() < 1e-9, "variance ratio after 3 rounds {r}");
+    }
+
+    /// A Richardson–Lucy step through a delta lobe is the plain ratio: where the model has 1.5 times the
+    /// target's mass the aim loses that factor, elsewhere it keeps its shape; a model equal to the target
+    /// leaves the aim as it is (the fixed point).
+    #[test]
+    fn the_shape_step_divides_out_the_model_s_excess() {
+        let d = SlopeDomain::square(64, 1.0);
+        let target = gauss(d, 0.2, 0.25);
+        let delta = crate::stages::ndf::Kernel {
+            values: vec![1.0],
+            w: 1,
+            h: 1,
+            dp: d.dp(),
+            dq: d.dq(),
+            label: "delta".into(),
+        };
+        let same = reweighted(&target, &target, &target, &delta, 1.0, f64::INFINITY);
+        for (a, b) in same.density.iter().zip(&target.density) {
+            assert!((a - b).abs() <= 1e-12 * b.max(1e-300), "{a} vs {b}");
+        }
+        let mut model = target.clone();
+        for j in 0..d.ny {
+            for i in d.nx / 2..d.nx {
+                model.density[j * d.nx + i] *= 1.5;
+            }
+        }
+        let a = reweighted(&target, &target, &model, &delta, 1.0, f64::INFINITY);
+        let floor = RATIO_FLOOR * target.density.iter().copied().fold(0.0, f64::max);
+        for j in 0..d.ny {
+            for i in 0..d.nx / 2 {
+                let (l, r) = (j * d.nx + i, j * d.nx + d.nx - 1 - i);
+                if target.density[r] < floor {
+                    continue; // under the floor the ratio is the floor's, not 1/1.5
+                }
+                let want = target.density[r] / target.density[l] / 1.5;
+                let got = a.density[r] / a.density[l];
+                assert!((got / want - 1.0).abs() < 1e-9, "cell ({i}, {j}): {got} vs {want}");
+            }
+        }
     }
 }

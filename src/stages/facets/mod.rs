@@ -561,16 +561,22 @@ pub fn rescaled(tile: &Tile, scale: [f64; 2]) -> Tile {
         .curvature_per_mm
         .iter_mut()
         .for_each(|h| *h = curved::rescaled(*h, scale, a));
-    let (z, heightfield, seams) = integrate(&arrangement, &tile.config);
     let sites: Vec<(f64, f64)> = arrangement
         .p
         .iter()
         .copied()
         .zip(arrangement.q.iter().copied())
         .collect();
+    reintegrated(tile, arrangement, &sites)
+}
+
+/// `tile` with a changed `arrangement` whose facet slopes are `slopes`: integrated again, the sampling and
+/// annealing records kept.
+fn reintegrated(tile: &Tile, arrangement: Arrangement, slopes: &[(f64, f64)]) -> Tile {
+    let (z, heightfield, seams) = integrate(&arrangement, &tile.config);
     Tile {
         config: tile.config,
-        slope_stats: stats_of(&sites),
+        slope_stats: stats_of(slopes),
         arrangement,
         z_mm: z,
         heightfield,
@@ -578,6 +584,32 @@ pub fn rescaled(tile: &Tile, scale: [f64; 2]) -> Tile {
         anneal: tile.anneal.clone(),
         seams,
     }
+}
+
+/// The same arrangement with its facets' slopes (and curvatures) replaced by those of `sites`, facet for
+/// facet (the facet at each position is the same index of the sampled set), re-integrated: the design
+/// loop's shape correction re-samples the facets from a corrected aim without re-annealing, so the order of
+/// the facets, and the steps it leaves, move only as much as the slopes do. `sites` must hold as many
+/// facets as the tile.
+pub fn resited(tile: &Tile, sites: &Sites) -> Tile {
+    let n = sites.sites.len();
+    assert_eq!(n, tile.arrangement.index.len(), "as many sites as facets");
+    let mean = sites
+        .sites
+        .iter()
+        .fold((0.0, 0.0), |a, s| (a.0 + s.0 / n as f64, a.1 + s.1 / n as f64));
+    let centred: Vec<(f64, f64)> = sites.sites.iter().map(|s| (s.0 - mean.0, s.1 - mean.1)).collect();
+    let mut arrangement = tile.arrangement.clone();
+    for (j, &k) in tile.arrangement.index.iter().enumerate() {
+        arrangement.p[j] = centred[k].0;
+        arrangement.q[j] = centred[k].1;
+    }
+    arrangement.curvature_per_mm = if sites.curvature.is_empty() {
+        vec![]
+    } else {
+        tile.arrangement.index.iter().map(|&k| sites.curvature[k]).collect()
+    };
+    reintegrated(tile, arrangement, &centred)
 }
 
 fn stats_of(s: &[(f64, f64)]) -> SlopeStats {

@@ -160,30 +160,27 @@ fn arc(raw: &[P3], ia: usize, ib: usize, tol: f64, q: f64, plane: Plane) -> Opti
     // The least sagitta's arc touches a raw point, so a written centre whose radii to A and B differ by any
     // `dr` would pass below it: the arc is also tried raised by fractions of the resolution (room the band
     // `[z_k, z_k + tol + q]` keeps above the points).
-    SIGMA_RAISES.iter().find_map(|&raise| {
-        let sig = sig + raise * q;
-        quantised_arc(raw, ia, ib, tol, q, plane, (a3, b3), sgn, sig)
-    })
+    SIGMA_RAISES
+        .iter()
+        .find_map(|&raise| quantised_arc(raw, (ia, ib), (tol, q), plane, (a3, b3), sig + raise * q))
 }
 
 /// Raises of the least sagitta tried, in units of the resolution `q`.
 const SIGMA_RAISES: [f64; 4] = [0.0, 0.125, 0.25, 0.5];
 
-/// The arc of sagitta `sig` from `ends.0` to `ends.1` (quantised) with its centre on the resolution, if the
-/// arc a controller draws from those numbers passes over every raw point between within the band.
-#[allow(clippy::too_many_arguments)]
+/// The arc of sagitta `sig` from `ends.0` to `ends.1` (`raw[ia]`, `raw[ib]` quantised) with its centre on
+/// the resolution `q`, if the arc a controller draws from those numbers passes over every raw point between
+/// within the band `[z_k, z_k + tol + q]`.
 fn quantised_arc(
     raw: &[P3],
-    ia: usize,
-    ib: usize,
-    tol: f64,
-    q: f64,
+    (ia, ib): (usize, usize),
+    (tol, q): (f64, f64),
     plane: Plane,
     (a3, b3): (P3, P3),
-    sgn: f64,
     sig: f64,
 ) -> Option<Arc> {
     let h = if plane == Plane::Zx { 0 } else { 1 };
+    let sgn = if b3[h] > a3[h] { 1.0 } else { -1.0 };
     let (a, b) = ([0.0, a3[2]], [sgn * (b3[h] - a3[h]), b3[2]]);
     let d = [b[0] - a[0], b[1] - a[1]];
     let l = d[0].hypot(d[1]);

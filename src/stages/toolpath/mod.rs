@@ -444,6 +444,7 @@ fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, Toolpath
             stepover,
             feed,
             tol,
+            arcs: cfg.arcs,
         })
     };
     let finish_side = || {

@@ -118,6 +118,11 @@ pub struct Level<'a> {
     /// its tip can sit there without touching it), mm. A run's entry then descends straight to just above
     /// it instead of ramping from a depth of cut above the run (the finishing levels know their stock).
     pub stock_cl: Option<&'a [Vec<f64>]>,
+    /// Fit arcs in the pass plane to each run on this write resolution, mm ([`super::arcs::fit`]): the
+    /// finishing levels follow the curved CL surface wherever it is above the level, which as lines alone
+    /// is one block per CL point on a convex stretch, and so do the roughing layers over the allowance
+    /// surface. `None`: straight blocks.
+    pub arc_resolution_mm: Option<f64>,
 }
 
 /// Emit one level: each pass's cutting runs; the next pass's first run is linked along the surface
@@ -144,13 +149,25 @@ pub fn emit_level(b: &mut Builder, lv: &Level, link: &dyn Fn(P3, P3) -> Vec<P3>)
                 let l = link(b.at, run[0]);
                 b.path(&simplify::simplify(&l, lv.tol_mm), lv.feed_mm_min);
             }
-            b.path(&run[1..], lv.feed_mm_min);
+            match lv.arc_resolution_mm {
+                Some(q) => {
+                    let raw = &row[i0..=i1];
+                    for pc in super::arcs::fit(raw, lv.tol_mm, q, super::arcs::pass_plane(raw)) {
+                        match pc {
+                            super::arcs::Piece::Line(p) => b.feed(p, lv.feed_mm_min),
+                            super::arcs::Piece::Arc(a) => b.arc(a, lv.feed_mm_min),
+                        }
+                    }
+                }
+                None => b.path(&run[1..], lv.feed_mm_min),
+            }
             row_end = Some(b.at);
         }
     }
 }
 
-/// Emit the roughing layers of `rp` with the roughing tool's data (see the module documentation);
+/// Emit the roughing layers of `rp` with the roughing tool's data (see the module documentation), its
+/// blocks simplified within `tol` and fitted with arcs on `arc_resolution_mm` when given;
 /// `link(a, b, z_layer)` gives the points of a link along the allowance surface.
 pub fn emit(
     b: &mut Builder,
@@ -158,7 +175,7 @@ pub fn emit(
     cut: &CuttingData,
     diameter_mm: f64,
     pitch_mm: f64,
-    tol: f64,
+    (tol, arc_resolution_mm): (f64, Option<f64>),
     link: &dyn Fn(P3, P3, f64) -> Vec<P3>,
 ) {
     let doc = cut.max_depth_of_cut_mm;
@@ -186,6 +203,7 @@ pub fn emit(
             pitch_mm,
             tol_mm: tol,
             stock_cl: None,
+            arc_resolution_mm,
         };
         // no stock above the layer before but the ridges between its paths
         b.entry_ceiling_z = zp + rp.scallop_mm + super::build::ENTRY_MARGIN_MM;

@@ -30,6 +30,8 @@ pub(super) struct StockSide<'a> {
     pub(super) stepover: f64,
     pub(super) feed: f64,
     pub(super) tol: f64,
+    /// Fit `G2`/`G3` arcs to the finishing levels' runs too (`toolpath.arcs`).
+    pub(super) arcs: bool,
 }
 
 /// The program up to the final finishing raster.
@@ -71,7 +73,7 @@ pub(super) fn stock_side<'a>(s: &StockSide<'a>) -> Result<StockBuilt<'a>, Toolpa
             rough_cut,
             rough.diameter_mm(),
             design.hf.pitch_mm,
-            s.tol,
+            (s.tol, s.arcs.then(|| s.machine.write_resolution_mm())),
             &link,
         );
         if rough.id != tool.id {
@@ -272,6 +274,7 @@ fn intermediate_levels(
             pitch_mm: design.hf.pitch_mm,
             tol_mm: tol,
             stock_cl: Some(&stock_cls),
+            arc_resolution_mm: s.arcs.then(|| s.machine.write_resolution_mm()),
         };
         let (m0, at0) = (b.moves.len(), b.at);
         {
