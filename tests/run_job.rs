@@ -330,6 +330,17 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         report_text.contains(&row),
         "the report's steepest-facet row does not give metrics.json's {beyond}"
     );
+    // and its facets row says how the design drew the target: the default is flat facets, whose tile.json
+    // records no curvature
+    assert!(
+        report_text.contains("flat facets, slopes scaled per axis"),
+        "the report does not name the design method"
+    );
+    let tile = json(&p("tile.json"));
+    assert!(
+        tile["facets"].get("curvature_per_mm").is_none(),
+        "flat facets have no curvature"
+    );
     // The verdict is the milled surface's, and the summary, the notes and the report say the same.
     let (pass, failed) = verdict_from_numbers(&m["milled"], tol);
     println!(

@@ -46,8 +46,13 @@ pub(super) fn parameters(
         (
             "facets".into(),
             format!(
-                "{}×{} of {} mm at {} µm, seed {}",
-                job.facets.facets_x, job.facets.facets_y, job.facets.facet_mm, job.facets.pitch_um, job.facets.seed
+                "{}×{} of {} mm at {} µm, seed {}; {}",
+                job.facets.facets_x,
+                job.facets.facets_y,
+                job.facets.facet_mm,
+                job.facets.pitch_um,
+                job.facets.seed,
+                design_method(&job.design)
             ),
         ),
         (
@@ -178,4 +183,18 @@ fn relief_line(job: &super::Job, tile: &Tile) -> String {
             "the annealed arrangement (step term) and the Poisson heights stayed within it unaided"
         }
     )
+}
+
+/// The design method and correction in words (`design.method`, `design.correction`).
+fn design_method(d: &crate::stages::design::DesignConfig) -> String {
+    use crate::stages::design::{Correction, DesignMethod};
+    let shape = match d.method {
+        DesignMethod::FlatFacets => "flat facets",
+        DesignMethod::CurvedFacets => "curved facets (each a dome over its cell of the target)",
+    };
+    let loop_ = match d.correction {
+        Correction::Scale => "slopes scaled per axis by the design rounds",
+        Correction::Shape => "the aim reweighted cell by cell by the design rounds",
+    };
+    format!("{shape}, {loop_}")
 }

@@ -78,7 +78,7 @@ pub struct DesignConfig {
 impl Default for DesignConfig {
     fn default() -> Self {
         Self {
-            method: DesignMethod::CurvedFacets,
+            method: DesignMethod::FlatFacets,
             correction: Correction::Scale,
             rounds: 4,
             gain: 1.0,
