@@ -303,6 +303,23 @@ pub fn run(
     })
 }
 
+/// The design tile's NDF on `domain`: its facets' slopes (each facet's area alike; a curved facet's over its
+/// area, [`DESIGN_SLOPES_PER_AXIS`]² per facet) convolved with the base lobe, normalised; and the fraction of
+/// those slopes beyond the grid. The loop's rounds and the verdict's design column both measure it.
+pub fn design_ndf(tile: &Tile, base: Option<&Kernel>, domain: crate::base::slope::SlopeDomain) -> (SlopeGrid, f64) {
+    let facet_slopes = facets::curved::facet_slopes(&tile.arrangement, tile.config.facet_mm, DESIGN_SLOPES_PER_AXIS);
+    let (raw, outside) = surface::ndf_of_slopes(&facet_slopes, domain);
+    let grid = match base {
+        Some(k) => {
+            let mut g = k.convolve(&raw);
+            g.normalise();
+            g
+        }
+        None => raw,
+    };
+    (grid, outside)
+}
+
 /// One round's figures, and its as-milled model's NDF.
 fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale: [f64; 2]) -> (Round, SlopeGrid) {
     let n = input.ndf;
@@ -318,13 +335,7 @@ fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale
     let (raw, _) = surface::ndf_of_slopes(&slopes, domain);
     let mut milled = input.scallop.convolve(&raw);
     milled.normalise();
-    let facet_slopes = facets::curved::facet_slopes(&tile.arrangement, tile.config.facet_mm, DESIGN_SLOPES_PER_AXIS);
-    let (design_raw, _) = surface::ndf_of_slopes(&facet_slopes, domain);
-    let mut design = match input.base {
-        Some(k) => k.convolve(&design_raw),
-        None => design_raw,
-    };
-    design.normalise();
+    let (design, _) = design_ndf(tile, input.base, domain);
     let obs = n.observed.within_cone(cone_tan).stats();
     let ratio = |g: &SlopeGrid| {
         let s = g.within_cone(cone_tan).stats();

@@ -411,6 +411,23 @@ impl Sites {
             .collect();
         self
     }
+
+    /// The curvature of the facet at each position, `index` giving which site sits there; empty for flat
+    /// facets.
+    fn curvature_at(&self, index: &[usize]) -> Vec<[f64; 3]> {
+        if self.curvature.is_empty() {
+            return vec![];
+        }
+        index.iter().map(|&k| self.curvature[k]).collect()
+    }
+}
+
+/// Subtract the mean slope from `sites` (a periodic tile's facets must average to no tilt) and return it.
+fn centre(sites: &mut [(f64, f64)]) -> (f64, f64) {
+    let n = sites.len() as f64;
+    let mean = sites.iter().fold((0.0, 0.0), |a, s| (a.0 + s.0 / n, a.1 + s.1 / n));
+    sites.iter_mut().for_each(|s| *s = (s.0 - mean.0, s.1 - mean.1));
+    mean
 }
 
 /// The facets' slopes for `cfg` (its seed and annealing play no part).
@@ -482,19 +499,14 @@ pub fn run_from(cfg: &FacetsConfig, sites: &Sites) -> Result<Tile, FacetsError> 
         cfg.test_permutations,
         &mut rng,
     );
-    let mean = sites_now
-        .iter()
-        .fold((0.0, 0.0), |a, s| (a.0 + s.0 / n as f64, a.1 + s.1 / n as f64));
-    sites_now.iter_mut().for_each(|s| *s = (s.0 - mean.0, s.1 - mean.1));
+    let mean = centre(&mut sites_now);
 
     // 2. arrangement
     let slope_stats = stats_of(&sites_now);
     let w_v = cfg.anneal.valley_weight * 0.5 * (slope_stats.cov[0][0] + slope_stats.cov[1][1]);
     let mut arrangement = Arrangement::new(cfg.facets_x, cfg.facets_y, &sites_now, w_v);
     let anneal = arrange::anneal(&mut arrangement, &cfg.anneal, &mut rng);
-    if !sites.curvature.is_empty() {
-        arrangement.curvature_per_mm = arrangement.index.iter().map(|&k| sites.curvature[k]).collect();
-    }
+    arrangement.curvature_per_mm = sites.curvature_at(&arrangement.index);
 
     // 3. integration and rasterisation
     let (z, heightfield, seams) = integrate(&arrangement, cfg);
@@ -592,23 +604,19 @@ fn reintegrated(tile: &Tile, arrangement: Arrangement, slopes: &[(f64, f64)]) ->
 /// the facets, and the steps it leaves, move only as much as the slopes do. `sites` must hold as many
 /// facets as the tile.
 pub fn resited(tile: &Tile, sites: &Sites) -> Tile {
-    let n = sites.sites.len();
-    assert_eq!(n, tile.arrangement.index.len(), "as many sites as facets");
-    let mean = sites
-        .sites
-        .iter()
-        .fold((0.0, 0.0), |a, s| (a.0 + s.0 / n as f64, a.1 + s.1 / n as f64));
-    let centred: Vec<(f64, f64)> = sites.sites.iter().map(|s| (s.0 - mean.0, s.1 - mean.1)).collect();
+    assert_eq!(
+        sites.sites.len(),
+        tile.arrangement.index.len(),
+        "as many sites as facets"
+    );
+    let mut centred = sites.sites.clone();
+    centre(&mut centred);
     let mut arrangement = tile.arrangement.clone();
     for (j, &k) in tile.arrangement.index.iter().enumerate() {
         arrangement.p[j] = centred[k].0;
         arrangement.q[j] = centred[k].1;
     }
-    arrangement.curvature_per_mm = if sites.curvature.is_empty() {
-        vec![]
-    } else {
-        tile.arrangement.index.iter().map(|&k| sites.curvature[k]).collect()
-    };
+    arrangement.curvature_per_mm = sites.curvature_at(&tile.arrangement.index);
     reintegrated(tile, arrangement, &centred)
 }
 

@@ -118,20 +118,62 @@ pub fn fit(raw: &[P3], tol: f64, q: f64, plane: Option<Plane>) -> Vec<Piece> {
     out
 }
 
+/// The chord of a candidate arc in the pass plane: its ends as written (`a3`, `b3`, on the resolution) and
+/// as `(t, z)` with `t` increasing along the pass (`a` at `t = 0`, `b`), its length `l`, unit direction `e`
+/// and normal `nrm`; `h` the pass axis's index and `sgn` the pass's direction along it.
+#[derive(Clone, Copy)]
+struct Chord {
+    h: usize,
+    sgn: f64,
+    a3: P3,
+    b3: P3,
+    a: [f64; 2],
+    b: [f64; 2],
+    l: f64,
+    e: [f64; 2],
+    nrm: [f64; 2],
+}
+
+impl Chord {
+    /// The chord from `from` to `to` quantised on `q`, if it advances along the pass.
+    fn new(from: P3, to: P3, q: f64, plane: Plane) -> Option<Self> {
+        let h = if plane == Plane::Zx { 0 } else { 1 };
+        let (a3, b3) = (quantize_point(from, q), quantize_point(to, q));
+        let sgn = if b3[h] > a3[h] { 1.0 } else { -1.0 };
+        let (a, b) = ([0.0, a3[2]], [sgn * (b3[h] - a3[h]), b3[2]]);
+        let d = [b[0] - a[0], b[1] - a[1]];
+        let l = d[0].hypot(d[1]);
+        if l <= 0.0 || d[0] <= 0.0 {
+            return None;
+        }
+        let e = [d[0] / l, d[1] / l];
+        Some(Self {
+            h,
+            sgn,
+            a3,
+            b3,
+            a,
+            b,
+            l,
+            e,
+            nrm: [-e[1], e[0]],
+        })
+    }
+}
+
 /// The quantised arc from `raw[ia]` to `raw[ib]` over the raw points between, if one passes.
 fn arc(raw: &[P3], ia: usize, ib: usize, tol: f64, q: f64, plane: Plane) -> Option<Arc> {
-    let h = if plane == Plane::Zx { 0 } else { 1 };
-    let (a3, b3) = (quantize_point(raw[ia], q), quantize_point(raw[ib], q));
-    // (t, z) with t increasing along the pass
-    let sgn = if b3[h] > a3[h] { 1.0 } else { -1.0 };
-    let (a, b) = ([0.0, a3[2]], [sgn * (b3[h] - a3[h]), b3[2]]);
-    let d = [b[0] - a[0], b[1] - a[1]];
-    let l = d[0].hypot(d[1]);
-    if l <= 0.0 || d[0] <= 0.0 {
-        return None;
-    }
-    let e = [d[0] / l, d[1] / l];
-    let nrm = [-e[1], e[0]];
+    let chord = Chord::new(raw[ia], raw[ib], q, plane)?;
+    let Chord {
+        h,
+        sgn,
+        a3,
+        a,
+        l,
+        e,
+        nrm,
+        ..
+    } = chord;
     // least sagitta passing over every interior point
     let mut sig = f64::NEG_INFINITY;
     for p in &raw[ia + 1..ib] {
@@ -162,13 +204,13 @@ fn arc(raw: &[P3], ia: usize, ib: usize, tol: f64, q: f64, plane: Plane) -> Opti
     // `[z_k, z_k + tol + q]` keeps above the points).
     SIGMA_RAISES
         .iter()
-        .find_map(|&raise| quantised_arc(raw, (ia, ib), (tol, q), plane, (a3, b3), sig + raise * q))
+        .find_map(|&raise| quantised_arc(raw, (ia, ib), (tol, q), plane, &chord, sig + raise * q))
 }
 
 /// Raises of the least sagitta tried, in units of the resolution `q`.
 const SIGMA_RAISES: [f64; 4] = [0.0, 0.125, 0.25, 0.5];
 
-/// The arc of sagitta `sig` from `ends.0` to `ends.1` (`raw[ia]`, `raw[ib]` quantised) with its centre on
+/// The arc of sagitta `sig` over `chord` (`raw[ia]` to `raw[ib]` quantised) with its centre on
 /// the resolution `q`, if the arc a controller draws from those numbers passes over every raw point between
 /// within the band `[z_k, z_k + tol + q]`.
 fn quantised_arc(
@@ -176,16 +218,20 @@ fn quantised_arc(
     (ia, ib): (usize, usize),
     (tol, q): (f64, f64),
     plane: Plane,
-    (a3, b3): (P3, P3),
+    chord: &Chord,
     sig: f64,
 ) -> Option<Arc> {
-    let h = if plane == Plane::Zx { 0 } else { 1 };
-    let sgn = if b3[h] > a3[h] { 1.0 } else { -1.0 };
-    let (a, b) = ([0.0, a3[2]], [sgn * (b3[h] - a3[h]), b3[2]]);
-    let d = [b[0] - a[0], b[1] - a[1]];
-    let l = d[0].hypot(d[1]);
-    let e = [d[0] / l, d[1] / l];
-    let nrm = [-e[1], e[0]];
+    let Chord {
+        h,
+        sgn,
+        a3,
+        b3,
+        a,
+        b,
+        l,
+        nrm,
+        ..
+    } = *chord;
     if sig.abs() >= l / 2.0 {
         return None;
     }

@@ -190,6 +190,17 @@ impl<'m> Builder<'m> {
         self.at = a.to;
     }
 
+    /// The blocks of a fitted run ([`super::arcs::fit`]) at feed `f`: lines by [`Self::feed`], arcs by
+    /// [`Self::arc`].
+    pub fn pieces(&mut self, pieces: &[super::arcs::Piece], f: f64) {
+        for pc in pieces {
+            match *pc {
+                super::arcs::Piece::Line(p) => self.feed(p, f),
+                super::arcs::Piece::Arc(a) => self.arc(a, f),
+            }
+        }
+    }
+
     /// Feed along `pts` at `f`.
     pub fn path(&mut self, pts: &[P3], f: f64) {
         for p in pts {

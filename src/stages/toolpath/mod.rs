@@ -380,12 +380,7 @@ fn finishing(
             let link = link_points(design, dc, b.at, pass.pts[0], |z| z);
             b.path(&simplify::simplify(&link, tol), feed);
         }
-        for pc in &pass.pieces {
-            match *pc {
-                arcs::Piece::Line(p) => b.feed(p, feed),
-                arcs::Piece::Arc(a) => b.arc(a, feed),
-            }
-        }
+        b.pieces(&pass.pieces, feed);
         if strategy == Strategy::Oneway {
             b.retract();
         }

@@ -152,12 +152,8 @@ pub fn emit_level(b: &mut Builder, lv: &Level, link: &dyn Fn(P3, P3) -> Vec<P3>)
             match lv.arc_resolution_mm {
                 Some(q) => {
                     let raw = &row[i0..=i1];
-                    for pc in super::arcs::fit(raw, lv.tol_mm, q, super::arcs::pass_plane(raw)) {
-                        match pc {
-                            super::arcs::Piece::Line(p) => b.feed(p, lv.feed_mm_min),
-                            super::arcs::Piece::Arc(a) => b.arc(a, lv.feed_mm_min),
-                        }
-                    }
+                    let pieces = super::arcs::fit(raw, lv.tol_mm, q, super::arcs::pass_plane(raw));
+                    b.pieces(&pieces, lv.feed_mm_min);
                 }
                 None => b.path(&run[1..], lv.feed_mm_min),
             }

@@ -358,7 +358,7 @@ fn region(
             r.name, as_seen.cov_ratio[0], as_seen.cov_ratio[1]
         ));
     }
-    let (design, _) = super::run::design_ndf(r.tile, input.base, domain);
+    let (design, _) = crate::stages::design::design_ndf(r.tile, input.base, domain);
     let mut design_m = metrics::measure(&r.ndf.observed, &design, r.target, &cfg.incident_deg, &tol, cone_tan);
     let mut milled_m = metrics::measure(&r.ndf.observed, &milled, r.target, &cfg.incident_deg, &tol, cone_tan);
     if let Some(h) = r.target.highlight() {

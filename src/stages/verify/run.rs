@@ -172,7 +172,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
     let n = input.ndf;
     let domain = n.config.domain();
     let tol = cfg.tolerances;
-    let (design, design_outside) = design_ndf(input.tile, input.base, domain);
+    let (design, design_outside) = crate::stages::design::design_ndf(input.tile, input.base, domain);
     let (milled, outside, measurement) = milled_ndf(cfg, input)?;
     let cone_tan = input.cone_deg.to_radians().tan();
     let mut design_m = metrics::measure(&n.observed, &design, input.target, &cfg.incident_deg, &tol, cone_tan);
@@ -649,26 +649,6 @@ fn wave_patch(cfg: &VerifyConfig, input: &VerifyInput, margin: usize) -> Result<
         crate::stages::optics::figures::wave_vs_geometric_png(&slice, &geo, &wi, max_slope),
         slice.albedo(),
     ))
-}
-
-/// The design tile's NDF: its facets' slopes (each facet's area alike; a curved facet's over its area)
-/// convolved with the base lobe.
-pub(super) fn design_ndf(
-    tile: &Tile,
-    base: Option<&Kernel>,
-    domain: crate::base::slope::SlopeDomain,
-) -> (SlopeGrid, f64) {
-    let facet_slopes = crate::stages::facets::curved::facet_slopes(
-        &tile.arrangement,
-        tile.config.facet_mm,
-        crate::stages::design::DESIGN_SLOPES_PER_AXIS,
-    );
-    let (raw, outside) = surface::ndf_of_slopes(&facet_slopes, domain);
-    let grid = match base {
-        Some(k) => normalised(k.convolve(&raw)),
-        None => raw,
-    };
-    (grid, outside)
 }
 
 fn normalised(mut g: SlopeGrid) -> SlopeGrid {
