@@ -351,6 +351,7 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
         value_label: "P22 (log10)".into(),
         scale: Scale::Log { decades: 4.0 },
         value_max: None,
+        value_min: None,
         plot_px: 480,
         rgb: None,
     }

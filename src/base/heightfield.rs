@@ -87,6 +87,19 @@ impl Heightfield {
     /// A shaded relief (hill shading lit from the upper left, tinted by height) with axes in mm, at most
     /// `max_px` pixels on its longer side (box-averaged down).
     pub fn relief_png(&self, title: &str, max_px: usize) -> crate::base::plot::Canvas {
+        self.relief_in(title, max_px, [0.0, 0.0], self.range())
+    }
+
+    /// [`Self::relief_png`] with its first cell's corner at `origin_mm` on the axes and the colours spanning
+    /// the heights `range_mm` (low, high; heights beyond take the end colours), so that two reliefs can be
+    /// read on one scale.
+    pub fn relief_in(
+        &self,
+        title: &str,
+        max_px: usize,
+        origin_mm: [f64; 2],
+        range_mm: (f64, f64),
+    ) -> crate::base::plot::Canvas {
         let f = self.nx.max(self.ny).div_ceil(max_px).max(1);
         let (w, h) = (self.nx / f, self.ny / f);
         let (w, h) = (w.max(1), h.max(1));
@@ -103,7 +116,7 @@ impl Heightfield {
             }
         }
         let step = self.pitch_mm * f as f64;
-        let (lo, hi) = self.range();
+        let (lo, hi) = range_mm;
         let span = (hi - lo).max(1e-12);
         let light = crate::base::geometry::Vec3::new(-1.0, 1.0, 1.4).normalize();
         let at = |i: isize, j: isize| -> f64 {
@@ -121,7 +134,7 @@ impl Heightfield {
                 let dzdy = (at(i, j + 1) - at(i, j - 1)) / (2.0 * step);
                 let n = crate::base::geometry::Vec3::new(-dzdx, -dzdy, 1.0).normalize();
                 let shade = n.dot(&light).max(0.0);
-                let c = viridis((z[k] - lo) / span);
+                let c = viridis(((z[k] - lo) / span).clamp(0.0, 1.0));
                 c.map(|v| (v as f64 * (0.25 + 0.75 * shade)).round().clamp(0.0, 255.0) as u8)
             })
             .collect();
@@ -131,14 +144,15 @@ impl Heightfield {
             values: &zum,
             nx: w,
             ny: h,
-            x_range: (0.0, sx),
-            y_range: (0.0, sy),
+            x_range: (origin_mm[0], origin_mm[0] + sx),
+            y_range: (origin_mm[1], origin_mm[1] + sy),
             title: title.to_string(),
             x_label: "x (mm)".into(),
             y_label: "y (mm)".into(),
             value_label: "z (µm)".into(),
             scale: Scale::Linear,
-            value_max: None,
+            value_max: Some(hi * 1000.0),
+            value_min: Some(lo * 1000.0),
             plot_px: 640,
             rgb: Some(&rgb),
         }

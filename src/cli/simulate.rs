@@ -44,7 +44,7 @@ pub struct Args {
     #[arg(long)]
     pub ideal: bool,
     /// The design (tile.json from `brdfmill facets`, tile.npy beside it), repeated from the work origin:
-    /// writes deviation.png and the over-/under-cut figures
+    /// writes deviation.png, design-vs-cut.png and the over-/under-cut figures
     #[arg(long)]
     pub design: Option<PathBuf>,
     /// Also write sim.stl (a closed solid through at most --stl-side samples per side)
@@ -143,6 +143,11 @@ pub fn run(a: &Args) -> Result<()> {
             .0
             .to_png()
     });
+    // the design and the cut side by side (absent when no window was assessed)
+    let pair_png = dev
+        .as_ref()
+        .and_then(|d| simulate::side_by_side(&sim, d, simulate::side_by_side::WINDOW_MM))
+        .map(|s| s.canvas.to_png());
     let stl = a.stl.then(|| {
         let tris = simulate::solid(&sim, a.stl_side, 1.0);
         brdfmill::base::stl::to_binary_stl(&tris, "brdfmill simulated cut")
@@ -159,6 +164,9 @@ pub fn run(a: &Args) -> Result<()> {
     brdfmill::base::io::write_atomic(&a.out.join("sim.png"), &relief)?;
     if let Some(b) = &dev_png {
         brdfmill::base::io::write_atomic(&a.out.join("deviation.png"), b)?;
+    }
+    if let Some(b) = &pair_png {
+        brdfmill::base::io::write_atomic(&a.out.join("design-vs-cut.png"), b)?;
     }
     if let Some(b) = &stl {
         brdfmill::base::io::write_atomic(&a.out.join("sim.stl"), b)?;
@@ -234,7 +242,11 @@ pub fn run(a: &Args) -> Result<()> {
     println!(
         "wrote     {}/sim.npy, sim.png, sim.json{}{}",
         a.out.display(),
-        if dev.is_some() { ", deviation.png" } else { "" },
+        match (dev.is_some(), pair_png.is_some()) {
+            (true, true) => ", deviation.png, design-vs-cut.png",
+            (true, false) => ", deviation.png",
+            _ => "",
+        },
         if a.stl { ", sim.stl" } else { "" }
     );
     Ok(())

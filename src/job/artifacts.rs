@@ -163,6 +163,7 @@ fn describe(p: &Path) -> String {
         "sim.npy" => "simulated milled heightfield, mm (NumPy)",
         "sim.png" => "simulated surface shaded relief",
         "deviation.png" => "simulated minus design",
+        "design-vs-cut.png" => "the design and the simulated cut side by side, and along one line",
         "sim.json" => "simulation and deviation statistics",
         "metrics.json" => "verification metrics and verdict",
         "wave.png" => "wave (Kirchhoff) and geometric BRDF of a milled patch",

@@ -69,7 +69,7 @@ pub(super) struct Cut {
     /// The same program on a perfect machine; `None` when the profile declares no error.
     pub(super) sim_ideal: Option<Simulation>,
     pub(super) dev: Deviation,
-    pub(super) figures: [report::Figure; 2],
+    pub(super) figures: [report::Figure; 3],
 }
 
 /// The toolpath and simulate stages for `design` (written as `design_file`): `None` when `until` stops
@@ -240,7 +240,7 @@ fn simulate_stage(
     design: &Heightfield,
     design_file: &str,
     o: &mut Out,
-) -> Result<(Simulation, Deviation, [report::Figure; 2]), JobError> {
+) -> Result<(Simulation, Deviation, [report::Figure; 3]), JobError> {
     let job = &ready.job;
     let scfg = job.simulate.config(&ready.toolpath);
     let sim = simulate::run_files(&program.texts(), &scfg).map_err(stage_err("simulate"))?;
@@ -273,6 +273,8 @@ fn simulate_stage(
         &dev_canvas,
     );
     o.write("deviation.png", &dev_figure.png())?;
+    let pair_figure = side_by_side_figure(&sim, &dev, &shape);
+    o.write("design-vs-cut.png", &pair_figure.png())?;
     o.write(
         "sim.json",
         SimFile::new(
@@ -285,5 +287,37 @@ fn simulate_stage(
         .to_json()
         .as_bytes(),
     )?;
-    Ok((sim, dev, [sim_figure, dev_figure]))
+    Ok((sim, dev, [pair_figure, sim_figure, dev_figure]))
+}
+
+/// The design and the cut side by side over a window at the centre of the area
+/// ([`simulate::side_by_side`]); when there is no such window (nothing assessed), a figure that says so.
+fn side_by_side_figure(sim: &Simulation, dev: &Deviation, shape: &Shape) -> report::Figure {
+    let title = "Design and cut, side by side";
+    match simulate::side_by_side(sim, dev, simulate::side_by_side::WINDOW_MM) {
+        Some(s) => {
+            let [x0, y0, x1, y1] = s.window_mm;
+            report::Figure::new(
+                title,
+                format!(
+                    "The design (left) and the simulated cut (right) over the same {:.2} × {:.2} mm at the centre of the \
+                     area (X {x0:.2} to {x1:.2}, Y {y0:.2} to {y1:.2} mm), on one height scale; below, both along the \
+                     dashed line, and their difference. Over this window the cut stands {:.2} µm rms from the design \
+                     where the {} mm ball can reach it; {:.1}% of it is out of its reach (concave corners narrower than \
+                     the bit, where the cut stands above the design).",
+                    x1 - x0,
+                    y1 - y0,
+                    s.rms_reachable_um,
+                    shape.diameter_mm(),
+                    s.unreachable_fraction * 100.0,
+                ),
+                &s.canvas,
+            )
+        }
+        None => report::Figure::new(
+            title,
+            "No window of the area was assessed against the design (the stock is narrower than two tool diameters), so there is nothing to set side by side.",
+            &crate::base::plot::Canvas::new(8, 8),
+        ),
+    }
 }

@@ -46,6 +46,8 @@ pub struct Heatmap<'a> {
     /// Top of the colour scale (default: the largest finite value). Panels compared side by side pass the
     /// same value so that one colour means one value in all of them.
     pub value_max: Option<f64>,
+    /// Bottom of the colour scale (default: the smallest finite value), for the same reason.
+    pub value_min: Option<f64>,
     /// Side of the square plot area in pixels (the longer side when the extents are not square).
     pub plot_px: u32,
     /// Pixel colours to show instead of the colour-mapped values (e.g. a shaded relief tinted by height);
@@ -114,7 +116,9 @@ impl Heatmap<'_> {
         let vmax = self
             .value_max
             .unwrap_or_else(|| finite.iter().copied().fold(f64::NEG_INFINITY, f64::max));
-        let vmin = finite.iter().copied().fold(f64::INFINITY, f64::min);
+        let vmin = self
+            .value_min
+            .unwrap_or_else(|| finite.iter().copied().fold(f64::INFINITY, f64::min));
         let (lo, hi, map): (f64, f64, Box<dyn Fn(f64) -> f64>) = match self.scale {
             Scale::Linear => {
                 let (lo, hi) = if vmax > vmin {
@@ -256,6 +260,7 @@ mod tests {
             value_label: "simulated − design height (µm)".into(),
             scale: Scale::Linear,
             value_max: None,
+            value_min: None,
             plot_px: 100,
             rgb: None,
         };
@@ -370,6 +375,7 @@ mod tests {
             value_label: "v".into(),
             scale: Scale::Linear,
             value_max: None,
+            value_min: None,
             plot_px: 40,
             rgb: None,
         };
@@ -399,6 +405,7 @@ mod tests {
             value_label: "v".into(),
             scale: Scale::Log { decades: 4.0 },
             value_max: None,
+            value_min: None,
             plot_px: 100,
             rgb: None,
         };

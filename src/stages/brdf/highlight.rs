@@ -358,6 +358,7 @@ impl Highlight {
                 value_label: "irradiance".into(),
                 scale: crate::base::plot::Scale::Linear,
                 value_max: Some(max),
+                value_min: None,
                 plot_px: 320,
                 rgb: None,
             }

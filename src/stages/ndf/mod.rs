@@ -285,6 +285,7 @@ pub fn render_png(grid: &SlopeGrid, title: &str) -> crate::base::plot::Canvas {
         value_label: "P22 (log)".into(),
         scale: crate::base::plot::Scale::Log { decades: 4.0 },
         value_max: None,
+        value_min: None,
         plot_px: 384,
         rgb: None,
     }

@@ -44,6 +44,7 @@ pub fn wave_vs_geometric_png(slice: &wave::WaveSlice, geo: &MicrofacetBrdf, wi: 
             value_label: "f (1/sr)".into(),
             scale: Scale::Log { decades: 4.0 },
             value_max: top.is_finite().then_some(top),
+            value_min: None,
             plot_px: 420,
             rgb: None,
         }

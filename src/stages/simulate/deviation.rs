@@ -442,6 +442,7 @@ impl Deviation {
             value_label: "µm".into(),
             scale: crate::base::plot::Scale::Linear,
             value_max: None,
+            value_min: None,
             plot_px: 640,
             rgb: None,
         }

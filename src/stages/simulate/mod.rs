@@ -28,9 +28,11 @@
 mod air;
 pub mod deviation;
 pub mod gcode;
+pub mod side_by_side;
 
 pub use air::{air_feeds, cut_and_air_mm};
 pub use deviation::{deviation, Deviation};
+pub use side_by_side::{side_by_side, SideBySide};
 
 use crate::base::heightfield::Heightfield;
 use crate::cut::machine::{Accuracy, Machine};
@@ -231,7 +233,7 @@ pub enum SimulateError {
 }
 
 /// The simulation in numbers.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
 pub struct SimStats {
     /// Material removed from the stock, mm³ (sum over cells of depth below the top × pitch²).
     pub removed_volume_mm3: f64,
