@@ -177,15 +177,35 @@ impl<'m> Builder<'m> {
         }
     }
 
-    /// An arc at feed `f`, capped like [`Self::feed`] at its steepest point (an arc under a half turn with no
-    /// vertical tangent is steepest at an end, where `|dz/ds| = |h − c_h| / r`), whether it rises or falls.
+    /// An arc at feed `f`, capped like [`Self::feed`]: its vertical speed `f·|dz/ds|` at most the machine's Z
+    /// feed, and where it descends at most the plunge feed. An arc in a vertical plane under a half turn with
+    /// no vertical tangent is steepest, rising or falling, at an end, where `|dz/ds| = |h − c_h| / r` and the
+    /// sign of `dz/ds` is the tangent's (`G2` turns clockwise in the plane's axes): so each end is capped
+    /// by its own direction — an arc climbing to a crest is not slowed to the plunge feed. An arc in the XY
+    /// plane keeps the stricter cap at its larger `|x − c_x| / r` (its Z is helical, not in the plane).
     pub fn arc(&mut self, mut a: moves::Arc, f: f64) {
         let (p, q, _) = a.plane.axes();
-        let h = if p == 2 { q } else { p };
         let r = (self.at[p] - a.center[p]).hypot(self.at[q] - a.center[q]);
-        let steep = ((self.at[h] - a.center[h]).abs().max((a.to[h] - a.center[h]).abs()) / r).min(1.0);
-        let zcap = self.machine.limits.max_feed_z_mm_min.min(self.plunge_mm_min);
-        a.feed_mm_min = if f * steep > zcap { zcap / steep } else { f };
+        let (zmax, plunge) = (
+            self.machine.limits.max_feed_z_mm_min,
+            self.machine.limits.max_feed_z_mm_min.min(self.plunge_mm_min),
+        );
+        // (|dz/ds|, the cap on the vertical speed there) at one end
+        let end = |at: P3| -> (f64, f64) {
+            let (rp, rq) = (at[p] - a.center[p], at[q] - a.center[q]);
+            // the unit tangent in the plane's axes: counter-clockwise (−rq, rp), clockwise (rq, −rp)
+            let (tp, tq) = if a.cw { (rq, -rp) } else { (-rq, rp) };
+            let dz = match (p, q) {
+                (2, _) => tp / r,
+                (_, 2) => tq / r,
+                // XY: no vertical tangent in the plane; the old, stricter reading
+                _ => return ((rp.abs() / r).min(1.0), plunge),
+            };
+            (dz.abs().min(1.0), if dz < 0.0 { plunge } else { zmax })
+        };
+        a.feed_mm_min = [end(self.at), end(a.to)]
+            .into_iter()
+            .fold(f, |f, (steep, cap)| if f * steep > cap { cap / steep } else { f });
         self.moves.push(Move::Arc(a));
         self.at = a.to;
     }
@@ -358,5 +378,51 @@ mod tests {
         // plunging allowed, or a run too short for 50 legs: no ramp
         assert!(ramp_legs(&run, 0.2, f64::INFINITY).is_none());
         assert!(ramp_legs(&run[..2], 0.2, tan).is_none());
+    }
+
+    /// An arc's feed is capped by the direction at each end: a quarter circle of a 0.25 mm ball rolling up
+    /// to a crest (in −X, `G2` in ZX, as a one-way raster runs) keeps the cutting feed when the machine's Z
+    /// feed allows it, its mirror rolling down from the crest is held to the plunge feed at its vertical
+    /// end, and the sign of `dz/ds` each end reads agrees with a finite difference along the arc.
+    #[test]
+    fn arcs_are_capped_by_the_plunge_feed_only_where_they_descend() {
+        let m =
+            Machine::load(&std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("machines/grbl-3018.toml")).unwrap();
+        let (r, f, plunge) = (0.25, 120.0, 40.0);
+        let c = [1.0, 0.0, -1.0];
+        // (start, end, G2?) in the XZ plane: up from 45° to the crest, and down from the crest
+        let s = std::f64::consts::FRAC_1_SQRT_2 * r;
+        let cases = [
+            // rising to the crest moving −X: from (c + s, c_z + s) to (c_x, c_z + r), clockwise in (Z, X)
+            ([c[0] + s, 0.0, c[2] + s], [c[0], 0.0, c[2] + r], true),
+            // falling from the crest moving −X to the vertical tangent's side: (c_x, c_z + r) to (c_x − r, c_z)
+            ([c[0], 0.0, c[2] + r], [c[0] - r, 0.0, c[2]], true),
+        ];
+        let mut feeds = vec![];
+        for (from, to, cw) in cases {
+            let mut b = Builder::new(&m, from);
+            b.plunge_mm_min = plunge;
+            let a = moves::Arc {
+                to,
+                center: c,
+                plane: moves::Plane::Zx,
+                cw,
+                feed_mm_min: 0.0,
+            };
+            // the direction of travel at the start, by a finite difference along the arc
+            let pts = a.points(from, 1e-6);
+            let dz0 = pts[0][2] - from[2];
+            b.arc(a, f);
+            let Some(Move::Arc(out)) = b.moves.last() else { panic!() };
+            feeds.push((dz0, out.feed_mm_min));
+        }
+        let zmax = m.limits.max_feed_z_mm_min;
+        // rising: capped only by the Z feed at its steeper end (|dz/ds| = 1/√2 there)
+        assert!(feeds[0].0 > 0.0, "{feeds:?}");
+        let want = f.min(zmax * std::f64::consts::SQRT_2);
+        assert!((feeds[0].1 - want).abs() < 1e-9, "{feeds:?}");
+        // falling to a vertical tangent: the plunge feed
+        assert!(feeds[1].0 < 0.0, "{feeds:?}");
+        assert!((feeds[1].1 - plunge.min(zmax)).abs() < 1e-9, "{feeds:?}");
     }
 }
