@@ -49,6 +49,7 @@ fn every_job_key_is_documented_and_every_documented_key_exists() {
         "svbrdf.region.highlight",
         "svbrdf.region.highlight_extent_deg",
         "svbrdf.region.material",
+        "simulate.arc_tolerance_um",
     ] {
         have.insert(k.to_string());
     }

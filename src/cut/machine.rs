@@ -57,6 +57,12 @@ pub struct Limits {
     /// LinuxCNC (its trajectory planner runs at the servo rate and blends within `G64 P`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_blocks_s: Option<f64>,
+    /// The largest sagitta of the chords the controller draws an arc with, mm: GRBL cuts every `G2`/`G3`
+    /// into straight segments whose endpoints lie on the arc and whose sagitta is at most its `$12` (0.002
+    /// mm by default). Absent: 0.002 for GRBL; LinuxCNC's planner follows the arc itself. The simulation of
+    /// a job cuts the arcs as these chords: it is the path the machine follows.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub arc_tolerance_mm: Option<f64>,
     /// The axes have backlash (lead screws, no compensation): finishing is then one-way climb by default, so
     /// every pass is cut with the same axis load direction. Default false.
     #[serde(default)]
@@ -76,7 +82,20 @@ impl Limits {
             (None, Dialect::Linuxcnc) => None,
         }
     }
+
+    /// The sagitta of the chords the controller draws arcs with, mm (None: it follows arcs exactly):
+    /// [`Self::arc_tolerance_mm`], else GRBL's default `$12`.
+    pub fn arc_chord_mm(&self, dialect: Dialect) -> Option<f64> {
+        match (self.arc_tolerance_mm, dialect) {
+            (Some(t), _) => Some(t),
+            (None, Dialect::Grbl) => Some(GRBL_ARC_TOLERANCE_MM),
+            (None, Dialect::Linuxcnc) => None,
+        }
+    }
 }
+
+/// GRBL 1.1's default arc tolerance `$12`, mm (`DEFAULT_ARC_TOLERANCE` in its `defaults.h`).
+pub const GRBL_ARC_TOLERANCE_MM: f64 = 0.002;
 
 /// Spindle speed range.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
@@ -536,6 +555,12 @@ impl Machine {
         }
         if let Some(r) = l.max_blocks_s {
             pos("limits.max_blocks_s", r)?;
+        }
+        if let Some(t) = l.arc_tolerance_mm {
+            pos("limits.arc_tolerance_mm", t)?;
+            if t > 0.1 {
+                return Err(field("limits.arc_tolerance_mm", "at most 0.1 mm", t));
+            }
         }
         let clear = self.program.clearance_z();
         if !(clear.is_finite() && clear >= self.program.safe_z_mm && clear <= self.travel.z_mm) {

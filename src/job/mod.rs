@@ -103,15 +103,21 @@ pub struct MachineSection {
 pub struct SimulateSection {
     /// Stock grid pitch, µm.
     pub pitch_um: f64,
-    /// Arc linearisation tolerance, µm.
-    pub arc_tolerance_um: f64,
+    /// Arc linearisation tolerance, µm. Absent: the chords the job's controller draws arcs with (GRBL's
+    /// `$12`, [`crate::cut::machine::Limits::arc_chord_mm`]), or 0.1 µm for a controller that follows arcs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub arc_tolerance_um: Option<f64>,
 }
+
+/// Arc linearisation of a simulation when neither the job nor the controller gives one, µm: well under
+/// the one-sided simplification tolerance, so the arcs are cut as written.
+pub const EXACT_ARC_TOLERANCE_UM: f64 = 0.1;
 
 impl Default for SimulateSection {
     fn default() -> Self {
         Self {
             pitch_um: 5.0,
-            arc_tolerance_um: 0.1,
+            arc_tolerance_um: None,
         }
     }
 }
@@ -127,7 +133,12 @@ impl SimulateSection {
             },
             tools: crate::stages::simulate::tool_table(&plan.machine),
             pitch_um: self.pitch_um,
-            arc_tolerance_um: self.arc_tolerance_um,
+            arc_tolerance_um: self.arc_tolerance_um.unwrap_or_else(|| {
+                plan.machine
+                    .limits
+                    .arc_chord_mm(plan.machine.dialect)
+                    .map_or(EXACT_ARC_TOLERANCE_UM, |mm| mm * 1e3)
+            }),
             machine: Some(plan.machine.clone()),
             ..Default::default()
         }

@@ -102,9 +102,17 @@ pub(super) fn parameters(
         (
             "simulation".into(),
             format!(
-                "{} µm pitch, {} cells",
+                "{} µm pitch, {} cells; arcs cut as chords of at most {} µm sagitta ({})",
                 job.simulate.pitch_um,
-                sim.stats.cells[0] * sim.stats.cells[1]
+                sim.stats.cells[0] * sim.stats.cells[1],
+                sim.stats.arc_tolerance_um,
+                match job.simulate.arc_tolerance_um {
+                    Some(_) => "the job's `simulate.arc_tolerance_um`",
+                    None if sim.stats.arc_tolerance_um > crate::job::EXACT_ARC_TOLERANCE_UM => {
+                        "as the controller draws them: its arc tolerance, GRBL's `$12`"
+                    }
+                    None => "the arcs as written: the controller follows them",
+                }
             ),
         ),
     ]
