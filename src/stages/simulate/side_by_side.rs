@@ -1,7 +1,7 @@
 //! The design and the simulated cut over the same window, side by side on one height scale, and both along
 //! one line across it: the comparison a reader makes first, before any statistic.
 //!
-//! The design's height at a stock cell is the one [`super::deviation`] compared with (the tile repeated from
+//! The design's height at a stock cell is the one [`super::deviation()`] compared with (the tile repeated from
 //! the work origin, read bilinearly), recovered as `cut − (cut − design)` from its map, so that the picture
 //! and the deviation figures cannot disagree.
 
@@ -32,7 +32,7 @@ pub struct SideBySide {
 }
 
 /// The design and the cut over a square window of side `window_mm` (less when the assessed interior is
-/// smaller) at the centre of the cells [`super::deviation`] assessed. None when it assessed none, or the
+/// smaller) at the centre of the cells [`super::deviation()`] assessed. None when it assessed none, or the
 /// design is not defined over the whole window (a design placed once, smaller than the window).
 pub fn side_by_side(sim: &Simulation, dev: &Deviation, window_mm: f64) -> Option<SideBySide> {
     let hf = &sim.heightfield;
