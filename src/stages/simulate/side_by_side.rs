@@ -12,6 +12,9 @@ use crate::base::plot::{Canvas, LinePlot, Series, PALETTE};
 /// Side of the window shown, mm: a few 1 mm facets, drawn at the simulation's own pitch.
 pub const WINDOW_MM: f64 = 3.0;
 
+/// Largest side of either relief's raster, px (a finer simulation is box-averaged down to it).
+const RELIEF_PX: usize = 1024;
+
 /// The figure and what its caption needs.
 #[derive(Clone, Debug)]
 pub struct SideBySide {
@@ -48,7 +51,8 @@ pub fn side_by_side(sim: &Simulation, dev: &Deviation, window_mm: f64) -> Option
             (i_lo, i_hi, j_lo, j_hi) = (i_lo.min(i), i_hi.max(i), j_lo.min(j), j_hi.max(j));
         }
     }
-    if i_lo > i_hi || j_lo > j_hi {
+    // at least two cells a side (a relief needs a neighbour to shade by)
+    if i_lo > i_hi || j_lo > j_hi || i_hi - i_lo < 1 || j_hi - j_lo < 1 {
         return None;
     }
     let n = ((window_mm / p).round() as usize)
@@ -92,8 +96,13 @@ pub fn side_by_side(sim: &Simulation, dev: &Deviation, window_mm: f64) -> Option
     let jm = n / 2;
     let profile_y = origin[1] + (jm as f64 + 0.5) * p;
     let mut panels = [
-        design.relief_in("design (the tile, repeated from the work origin)", n, origin, range),
-        cut.relief_in("simulated cut", n, origin, range),
+        design.relief_in(
+            "design (the tile, repeated from the work origin)",
+            RELIEF_PX,
+            origin,
+            range,
+        ),
+        cut.relief_in("simulated cut", RELIEF_PX, origin, range),
     ];
     // the profile's line on both reliefs (their plot areas start 70 px in and 28 px down, 640 px across)
     let py = 28 + 640 - (((profile_y - origin[1]) / side) * 640.0).round() as i32;
