@@ -102,19 +102,30 @@ impl<'m> Builder<'m> {
     /// `f·|dz|/d` is at most the plunge feed.
     pub fn feed(&mut self, p: P3, f: f64) {
         let d = moves::dist(self.at, p);
-        let dz = p[2] - self.at[2];
-        let zcap = if dz < 0.0 {
-            self.machine.limits.max_feed_z_mm_min.min(self.plunge_mm_min)
-        } else {
-            self.machine.limits.max_feed_z_mm_min
-        };
-        let f = if d > 0.0 && f * dz.abs() / d > zcap {
-            (zcap * d / dz.abs()).min(f)
+        let f = if d > 0.0 {
+            self.z_capped(f, (p[2] - self.at[2]) / d)
         } else {
             f
         };
         self.moves.push(Move::Feed(p, f));
         self.at = p;
+    }
+
+    /// `f` lowered so that the vertical speed `f·|dz/ds|` is at most the machine's Z feed and, going down
+    /// (`dz/ds < 0`), the tool's plunge feed: the cap [`Self::feed`] and [`Self::arc`] share.
+    fn z_capped(&self, f: f64, dz_ds: f64) -> f64 {
+        let zmax = self.machine.limits.max_feed_z_mm_min;
+        let cap = if dz_ds < 0.0 {
+            zmax.min(self.plunge_mm_min)
+        } else {
+            zmax
+        };
+        let steep = dz_ds.abs().min(1.0);
+        if f * steep > cap {
+            cap / steep
+        } else {
+            f
+        }
     }
 
     /// Travel over the start of `run`, descend through air to the entry height and ramp into the material
@@ -186,26 +197,19 @@ impl<'m> Builder<'m> {
     pub fn arc(&mut self, mut a: moves::Arc, f: f64) {
         let (p, q, _) = a.plane.axes();
         let r = (self.at[p] - a.center[p]).hypot(self.at[q] - a.center[q]);
-        let (zmax, plunge) = (
-            self.machine.limits.max_feed_z_mm_min,
-            self.machine.limits.max_feed_z_mm_min.min(self.plunge_mm_min),
-        );
-        // (|dz/ds|, the cap on the vertical speed there) at one end
-        let end = |at: P3| -> (f64, f64) {
+        // dz/ds at one end
+        let end = |at: P3| -> f64 {
             let (rp, rq) = (at[p] - a.center[p], at[q] - a.center[q]);
             // the unit tangent in the plane's axes: counter-clockwise (−rq, rp), clockwise (rq, −rp)
             let (tp, tq) = if a.cw { (rq, -rp) } else { (-rq, rp) };
-            let dz = match (p, q) {
+            match (p, q) {
                 (2, _) => tp / r,
                 (_, 2) => tq / r,
-                // XY: no vertical tangent in the plane; the old, stricter reading
-                _ => return ((rp.abs() / r).min(1.0), plunge),
-            };
-            (dz.abs().min(1.0), if dz < 0.0 { plunge } else { zmax })
+                // XY: no vertical tangent in the plane; the old, stricter reading, as a descent
+                _ => -(rp.abs() / r),
+            }
         };
-        a.feed_mm_min = [end(self.at), end(a.to)]
-            .into_iter()
-            .fold(f, |f, (steep, cap)| if f * steep > cap { cap / steep } else { f });
+        a.feed_mm_min = self.z_capped(self.z_capped(f, end(self.at)), end(a.to));
         self.moves.push(Move::Arc(a));
         self.at = a.to;
     }
