@@ -69,6 +69,10 @@ pub const VERTICAL_MM: f64 = 1e-7;
 /// Largest amount by which a bull-nose sweep height may exceed the exact minimum, mm (1 pm).
 pub const BULL_TOLERANCE_MM: f64 = 1e-9;
 
+/// What [`Sweep::bull_floor`] stands below its closed form, mm (20 pm): the rounding of its square roots
+/// near the rim, so that a cell it skips is one the exact minimum would not lower by more than a hair.
+pub const BULL_FLOOR_SLACK_MM: f64 = 2e-8;
+
 /// A cell counts as lowered by a segment (for the report of rapids that cut) only when by more than this, mm
 /// (1 nm): a retract from the bottom of a cut re-sweeps the end sphere the cut already left, up to rounding.
 pub const LOWERED_MM: f64 = 1e-6;
@@ -286,9 +290,9 @@ impl Sweep {
                         continue;
                     }
                     hits += 1;
-                    // `ρ(t) ≥ h` and `prof` is non-decreasing, so `f ≥ z(lo) + prof(h)`: a cell that bound
-                    // cannot lower is left without solving (most of a dense raster's neighbouring passes)
-                    if az + lo * dz + self.bit.profile(h2.sqrt()) >= *cell {
+                    // a cell that a lower bound of the sweep cannot lower is left without solving (most of a
+                    // dense raster's neighbouring passes)
+                    if self.bull_floor(h2, tp, lo, hi) >= *cell {
                         continue;
                     }
                     let z = self.bull_min(h2, tp, lo, hi);
@@ -302,65 +306,168 @@ impl Sweep {
         (hits, drop)
     }
 
-    /// Minimum of the convex `f(t) = z(t) + prof(ρ(t))` over `[lo, hi]`: Newton's method on `f'` from the
-    /// stationary point of the ball of radius `rc` at the distance `h − R0` (the bull is that ball widened by
-    /// `R0`, so its minimum lies near there), safeguarded by the bracket `[a, b]` on the sign of `f'` (a step
-    /// that leaves it, or does not halve it twice running, is a bisection). Certified by two lower bounds of
-    /// the convex `f`: the tangent at the last point, `f(t) − |f'(t)|·(b − a)`, and the tangents at the
-    /// bracket's ends; stopped when either is within [`BULL_TOLERANCE_MM`] of the best value found.
+    /// A lower bound of [`Sweep::bull_min`] in closed form, less [`BULL_FLOOR_SLACK_MM`].
     ///
-    /// With `s = ρ − R0 > 0` and `q = rc² − s²`: `prof' = s / √q`, `prof'' = rc² / q^{3/2}`; `ρ' = L²(t − t_p)/ρ`,
-    /// `ρ'' = L² h² / ρ³`; `f' = dz + prof'·ρ'`, `f'' = prof''·ρ'² + prof'·ρ''` (both 0 on the flat, `s ≤ 0`).
-    fn bull_min(&self, h2: f64, tp: f64, lo: f64, hi: f64) -> f64 {
+    /// The bull is the ball of radius `rc` widened by the flat's disc of radius `R0`, so with `v = (h, L u)`
+    /// the point's offset from the tip in the segment's frame, `ρ − R0 = |v| − R0` is its distance to that
+    /// disc, at least its distance to the square `[−R0, R0]²` around it:
+    /// `ρ − R0 ≥ √(h'² + (L|u| − R0)₊²)` with `h' = (h − R0)₊`. As `prof` is non-decreasing,
+    /// `f(t) ≥ z(t) + prof_rc(√(h'² + (L|u| − R0)₊²))`: for `|u| ≤ w0 = R0/L` a constant profile over a
+    /// rising `z` (least at the band's low end), for `u ≤ −w0` the ball of radius `rc` at distance `h'` from
+    /// a segment whose foot is `t_p − w0` (its closed form, [`Sweep::row`]'s ball arm), and for `u ≥ w0` no
+    /// lower than the band's high end (`z` rises and the ball's stationary point is behind it). Where the
+    /// ball's closed form lands outside its radius the weaker `z(lo) + prof_rc(h')` stands in. Near the
+    /// rim the square roots of small differences round by a few picometres (5 pm at most over the default
+    /// job), hence the slack.
+    #[inline(always)]
+    fn bull_floor(&self, h2: f64, tp: f64, lo: f64, hi: f64) -> f64 {
         let Shape::Bull {
             corner_radius_mm: rc, ..
         } = self.bit
         else {
-            unreachable!("bull_min on a {:?}", self.bit)
+            unreachable!("bull_floor on a {:?}", self.bit)
         };
+        let (az, dz) = (self.az, self.dz);
         let r0 = self.r - rc;
-        let rc2 = rc * rc;
-        let l2 = if self.inv_l2 > 0.0 { 1.0 / self.inv_l2 } else { 0.0 };
-        // (f, f', f'') at t
-        let eval = |t: f64| -> (f64, f64, f64) {
-            let u = t - tp;
-            let rho = (h2 + l2 * u * u).sqrt();
-            let z = self.az + t * self.dz;
-            let s = rho - r0;
-            if s <= 0.0 {
-                return (z, self.dz, 0.0);
-            }
-            let q = (rc2 - s * s).max(0.0);
-            let sq = q.sqrt();
-            let (p0, p1) = (rc - sq, if sq > 0.0 { s / sq } else { f64::INFINITY });
-            let p2 = if q > 0.0 { rc2 / (q * sq) } else { f64::INFINITY };
-            let (r1, r2) = if rho > 0.0 {
-                (l2 * u / rho, l2 * h2 / (rho * rho * rho))
-            } else {
-                (0.0, 0.0)
-            };
-            // 0·∞ at a tangent point of the rim: the slope there is that of z alone
-            let d1 = self.dz + if r1 == 0.0 { 0.0 } else { p1 * r1 };
-            let d2 = p2 * r1 * r1 + if r2 == 0.0 { 0.0 } else { p1 * r2 };
-            (z + p0, d1, d2)
+        let hp = (h2.sqrt() - r0).max(0.0);
+        let rp = (rc * rc - hp * hp).max(0.0).sqrt();
+        // `ρ(t) ≥ h` and `prof` is non-decreasing: `f ≥ z(lo) + prof(h)`
+        let weak = az + lo * dz + rc - rp;
+        if self.inv_l <= 0.0 {
+            return weak - BULL_FLOOR_SLACK_MM;
+        }
+        let l = 1.0 / self.inv_l;
+        let w0 = r0 * self.inv_l;
+        // the band |u| ≤ w0 and beyond it
+        let tm = (tp - w0).max(lo);
+        let mut bound = if tm <= hi {
+            az + tm * dz + rc - rp
+        } else {
+            f64::INFINITY
         };
-        let (mut a, mut b) = (lo, hi);
-        let ((mut fa, mut da, _), (mut fb, mut db, _)) = (eval(a), eval(b));
+        // the ball behind the band
+        let tl = (tp - w0).min(hi);
+        if lo <= tl {
+            let ts = (tp - w0 - rp * self.c1).clamp(lo, tl);
+            let e = l * (ts - tp + w0);
+            let q = rp * rp - e * e;
+            bound = bound.min(if q >= 0.0 { az + ts * dz + rc - q.sqrt() } else { weak });
+        }
+        // the band wholly before the interval
+        if tp + w0 < lo {
+            let e = l * (lo - tp - w0);
+            let q = rp * rp - e * e;
+            bound = bound.min(if q >= 0.0 { az + lo * dz + rc - q.sqrt() } else { weak });
+        }
+        bound.max(weak) - BULL_FLOOR_SLACK_MM
+    }
+
+    /// Minimum of the convex `f(t) = z(t) + prof(ρ(t))` over `[lo, hi]`: at an end ([`Sweep::bull_ends`]) or
+    /// inside ([`Sweep::bull_interior`]).
+    fn bull_min(&self, h2: f64, tp: f64, lo: f64, hi: f64) -> f64 {
+        match self.bull_ends(h2, tp, lo, hi) {
+            Ok(z) => z,
+            Err(e) => self.bull_interior(h2, tp, e),
+        }
+    }
+
+    /// `(f, f', f'')` of the bull's `f(t) = z(t) + prof(ρ(t))` at `t`, `l2 = L²`.
+    ///
+    /// With `s = ρ − R0 > 0` and `q = rc² − s²`: `prof' = s / √q`, `prof'' = rc² / q^{3/2}`; `ρ' = L²(t − t_p)/ρ`,
+    /// `ρ'' = L² h² / ρ³`; `f' = dz + prof'·ρ'`, `f'' = prof''·ρ'² + prof'·ρ''` (both 0 on the flat, `s ≤ 0`).
+    #[inline(always)]
+    fn bull_eval(&self, h2: f64, tp: f64, l2: f64, t: f64) -> (f64, f64, f64) {
+        let (r0, rc) = self.bull_radii();
+        let rc2 = rc * rc;
+        let u = t - tp;
+        let rho = (h2 + l2 * u * u).sqrt();
+        let z = self.az + t * self.dz;
+        let s = rho - r0;
+        let q = (rc2 - s * s).max(0.0);
+        let sq = q.sqrt();
+        // at the rim (`q = 0`, `s > 0`) both are +∞, as the profile stands vertical there
+        let (p0, p1) = (rc - sq, s / sq);
+        let p2 = rc2 / (q * sq);
+        let on = rho > 0.0;
+        let (r1, r2) = (
+            if on { l2 * u / rho } else { 0.0 },
+            if on { l2 * h2 / (rho * rho * rho) } else { 0.0 },
+        );
+        // 0·∞ at a tangent point of the rim: the slope there is that of z alone
+        let d1 = self.dz + if r1 == 0.0 { 0.0 } else { p1 * r1 };
+        let d2 = p2 * r1 * r1 + if r2 == 0.0 { 0.0 } else { p1 * r2 };
+        let flat = s <= 0.0;
+        (
+            if flat { z } else { z + p0 },
+            if flat { self.dz } else { d1 },
+            if flat { 0.0 } else { d2 },
+        )
+    }
+
+    /// `(R0, rc)`: the bull's flat radius and corner radius, mm.
+    #[inline(always)]
+    fn bull_radii(&self) -> (f64, f64) {
+        let Shape::Bull {
+            corner_radius_mm: rc, ..
+        } = self.bit
+        else {
+            unreachable!("a bull's sweep with a {:?}", self.bit)
+        };
+        (self.r - rc, rc)
+    }
+
+    /// `L²` (0 for a vertical segment).
+    #[inline(always)]
+    fn l2(&self) -> f64 {
+        if self.inv_l2 > 0.0 {
+            1.0 / self.inv_l2
+        } else {
+            0.0
+        }
+    }
+
+    /// The minimum when it lies at an end of `[lo, hi]` (`f' ≥ 0` at `lo`, or `≤ 0` at `hi`: `f` is convex);
+    /// otherwise the ends' `(t, f, f')`, a bracket of the minimum.
+    #[inline(always)]
+    fn bull_ends(&self, h2: f64, tp: f64, lo: f64, hi: f64) -> Result<f64, [f64; 6]> {
+        let l2 = self.l2();
+        let ((fa, da, _), (fb, db, _)) = (self.bull_eval(h2, tp, l2, lo), self.bull_eval(h2, tp, l2, hi));
         if hi - lo <= 0.0 || da >= 0.0 {
-            return fa;
+            return Ok(fa);
         }
         if db <= 0.0 {
-            return fb;
+            return Ok(fb);
         }
-        let mut best = fa.min(fb);
+        Err([lo, fa, da, hi, fb, db])
+    }
+
+    /// The first Newton point: the stationary point of the ball of radius `rc` at the distance `h − R0` (the
+    /// bull is that ball widened by `R0`, so its minimum lies near there), or the bracket's middle.
+    #[inline(always)]
+    fn bull_start(&self, h2: f64, tp: f64, a: f64, b: f64) -> f64 {
+        let (r0, rc) = self.bull_radii();
         let hs = (h2.sqrt() - r0).max(0.0);
-        let mut t = tp - (rc2 - hs * hs).max(0.0).sqrt() * self.c1;
-        if !(t > a && t < b) {
-            t = 0.5 * (a + b);
+        let t = tp - (rc * rc - hs * hs).max(0.0).sqrt() * self.c1;
+        if t > a && t < b {
+            t
+        } else {
+            0.5 * (a + b)
         }
+    }
+
+    /// Minimum of the convex `f(t) = z(t) + prof(ρ(t))` inside the bracket `e` of [`Sweep::bull_ends`]: Newton's
+    /// method on `f'` from [`Sweep::bull_start`], safeguarded by the bracket `[a, b]` on the sign of `f'` (a
+    /// step that leaves it, or does not halve it twice running, is a bisection). Certified by two lower bounds
+    /// of the convex `f` ([`bull_certified`]); the value returned is the best found, never below the true
+    /// minimum and at most [`BULL_TOLERANCE_MM`] above it.
+    fn bull_interior(&self, h2: f64, tp: f64, e: [f64; 6]) -> f64 {
+        let l2 = self.l2();
+        let [mut a, mut fa, mut da, mut b, mut fb, mut db] = e;
+        let mut best = fa.min(fb);
+        let mut t = self.bull_start(h2, tp, a, b);
         let mut slow = 0;
         for _ in 0..200 {
-            let (ft, dt, d2t) = eval(t);
+            let (ft, dt, d2t) = self.bull_eval(h2, tp, l2, t);
             best = best.min(ft);
             if dt == 0.0 {
                 break;
@@ -371,14 +478,7 @@ impl Sweep {
             } else {
                 (b, fb, db) = (t, ft, dt);
             }
-            let at_t = ft - dt.abs() * (b - a);
-            let ends = if da.is_finite() && db.is_finite() && db > da {
-                let x = (fb - fa + da * a - db * b) / (da - db);
-                fa + da * (x - a)
-            } else {
-                f64::NEG_INFINITY
-            };
-            if best - at_t.max(ends) <= BULL_TOLERANCE_MM || b - a <= 1e-15 {
+            if bull_certified(best, [a, fa, da, b, fb, db], ft, dt) {
                 break;
             }
             slow = if b - a > 0.5 * w { slow + 1 } else { 0 };
@@ -392,6 +492,22 @@ impl Sweep {
         }
         best
     }
+}
+
+/// Whether `best` (the least `f` found) is within [`BULL_TOLERANCE_MM`] of the minimum of the convex `f`, by two
+/// lower bounds: the tangent at the last point `(t, f, f')`, `f − |f'|·(b − a)`, and the meeting point of the
+/// tangents at the bracket's ends `e = [a, f(a), f'(a), b, f(b), f'(b)]`; or the bracket is a point.
+#[inline(always)]
+fn bull_certified(best: f64, e: [f64; 6], ft: f64, dt: f64) -> bool {
+    let [a, fa, da, b, fb, db] = e;
+    let at_t = ft - dt.abs() * (b - a);
+    let ends = if da.is_finite() & db.is_finite() & (db > da) {
+        let x = (fb - fa + da * a - db * b) / (da - db);
+        fa + da * (x - a)
+    } else {
+        f64::NEG_INFINITY
+    };
+    (best - at_t.max(ends) <= BULL_TOLERANCE_MM) | (b - a <= 1e-15)
 }
 
 #[cfg(test)]
@@ -416,6 +532,43 @@ mod tests {
             }
         }
         best
+    }
+
+    /// `(h², t_p, lo, hi)` of a bull's sweep above `(x, y)` as [`Sweep::row`] works them out; None when
+    /// the bit does not pass over the point.
+    fn bull_interval(s: &Sweep, x: f64, y: f64) -> Option<(f64, f64, f64, f64)> {
+        let (ex, ey) = (x - s.ax, y - s.ay);
+        let ed = ex * s.dx + ey * s.dy;
+        let tp = ed * s.inv_l2;
+        let h2 = (ex * ex + ey * ey - ed * tp).max(0.0);
+        let rp2 = s.r2 - h2;
+        if rp2 < 0.0 {
+            return None;
+        }
+        let w = rp2.sqrt() * s.inv_l;
+        let (lo, hi) = ((tp - w).max(0.0), (tp + w).min(1.0));
+        (lo <= hi).then_some((h2, tp, lo, hi))
+    }
+
+    /// Along a level segment the bull's minimum over the band `|u| ≤ R0/L` is its profile at the distance
+    /// `h`, `z + prof(h)` (the tip passes straight by): the floor is exact there, not merely below.
+    #[test]
+    fn bull_floor_is_exact_beside_a_level_segment() {
+        let bit = Shape::Bull {
+            diameter_mm: 0.515,
+            corner_radius_mm: 0.25,
+        };
+        let s = Sweep::new(bit, [0.0, 0.0, -0.3], [1.0, 0.0, -0.3]);
+        for h in [0.0, 0.005, 0.0075, 0.1, 0.2, 0.25] {
+            let (h2, tp, lo, hi) = bull_interval(&s, 0.5, h).expect("covered");
+            let want = -0.3 + bit.profile(h);
+            let floor = s.bull_floor(h2, tp, lo, hi);
+            assert!(
+                (floor - want).abs() <= 2.0 * BULL_FLOOR_SLACK_MM,
+                "h {h}: floor {floor}, z + prof(h) {want}"
+            );
+            assert!((s.lowest(0.5, h) - want).abs() <= BULL_TOLERANCE_MM);
+        }
     }
 
     fn bits() -> impl Strategy<Value = Shape> {
@@ -461,6 +614,33 @@ mod tests {
             if exact.is_finite() {
                 let (lo, hi) = s.row_span(q[1]).expect("covered point outside the row span");
                 prop_assert!(lo <= q[0] && q[0] <= hi);
+            }
+        }
+
+        /// The bull's closed-form floor is never above the minimum, which dense sampling bounds from above
+        /// (an independent truth: the bit placed along the segment), so a cell it lets the row skip is one
+        /// the sweep would not lower; and a cell a hair above the minimum is still lowered to it.
+        #[test]
+        fn bull_floor_is_below_the_sampled_minimum(
+            r in 0.1..2.0f64,
+            flat in 0.0..0.3f64,
+            a in prop::array::uniform3(-1.0..1.0f64),
+            b in prop::array::uniform3(-1.0..1.0f64),
+            q in prop::array::uniform2(-2.0..2.0f64),
+        ) {
+            let bit = Shape::Bull { diameter_mm: 2.0 * r, corner_radius_mm: r * (1.0 - flat) };
+            let s = Sweep::new(bit, a, b);
+            if let Some((h2, tp, lo, hi)) = bull_interval(&s, q[0], q[1]) {
+                let floor = s.bull_floor(h2, tp, lo, hi);
+                let dense = sampled(bit, a, b, q[0], q[1], 20_000);
+                prop_assert!(floor <= dense, "{bit:?} {a:?} {b:?} {q:?}: floor {floor} above sampled {dense}");
+                let exact = s.lowest(q[0], q[1]);
+                prop_assert!(floor <= exact, "floor {floor} above the solved minimum {exact}");
+                for above in [1e-7, 1e-4] {
+                    let mut cell = [exact + above];
+                    s.row(q[1], q[0], 0.0, &mut cell);
+                    prop_assert!(cell[0] <= exact + BULL_TOLERANCE_MM, "a cell {above} mm above the minimum was skipped");
+                }
             }
         }
 
