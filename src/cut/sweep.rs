@@ -238,10 +238,10 @@ impl Sweep {
         let mut hits = 0;
         let mut drop = 0.0f64;
         match self.bit {
-            // (selects and non-short-circuit `&`, with the column counted in `i32`, so that the loops
-            // compile to vector instructions)
+            // (selects and non-short-circuit `&`, with the column counted in `i32` and the reductions kept
+            // per lane, so that the loops compile to vector instructions)
             Shape::Ball { .. } => {
-                for (i, cell) in (0i32..).zip(row.iter_mut()) {
+                (hits, drop) = lanes(row, |i| {
                     let ex = ex0 + f64::from(i) * pitch;
                     let ed = ex * dx + eyd;
                     let tp = ed * inv_l2;
@@ -252,14 +252,11 @@ impl Sweep {
                     let s = r2 - (fx * fx + fy * fy);
                     let z = az + t * dz + r - s.max(0.0).sqrt();
                     let inside = (rp2 >= -rim) & (s >= -rim);
-                    let c = *cell;
-                    hits += inside as usize;
-                    drop = drop.max(if inside { c - z } else { 0.0 });
-                    *cell = if inside & (z < c) { z } else { c };
-                }
+                    (z, inside)
+                });
             }
             Shape::Flat { .. } => {
-                for (i, cell) in (0i32..).zip(row.iter_mut()) {
+                (hits, drop) = lanes(row, |i| {
                     let ex = ex0 + f64::from(i) * pitch;
                     let ed = ex * dx + eyd;
                     let tp = ed * inv_l2;
@@ -267,12 +264,8 @@ impl Sweep {
                     let w = rp2.max(0.0).sqrt() * inv_l;
                     let t = (tp - w).max(0.0);
                     let inside = (rp2 >= -rim) & (t <= (tp + w).min(1.0));
-                    let z = az + t * dz;
-                    let c = *cell;
-                    hits += inside as usize;
-                    drop = drop.max(if inside { c - z } else { 0.0 });
-                    *cell = if inside & (z < c) { z } else { c };
-                }
+                    (az + t * dz, inside)
+                });
             }
             Shape::Bull { .. } => {
                 for (i, cell) in row.iter_mut().enumerate() {
@@ -508,6 +501,44 @@ fn bull_certified(best: f64, e: [f64; 6], ft: f64, dt: f64) -> bool {
         f64::NEG_INFINITY
     };
     (best - at_t.max(ends) <= BULL_TOLERANCE_MM) | (b - a <= 1e-15)
+}
+
+/// Cells [`lanes`] takes at a time: a vector register's worth or two, so that the per-lane reductions
+/// stay in registers.
+const LANES: usize = 8;
+
+/// `row[i] = min(row[i], z)` where `(z, inside) = cell(i)` and the cell is inside the footprint; returns
+/// the cells inside and the most any was lowered, mm (0 when none was). The count and the largest drop are
+/// kept per lane and reduced at the end (a running maximum carried from cell to cell would keep the loop
+/// scalar); the result is the same, the maximum being exact.
+#[inline(always)]
+fn lanes(row: &mut [f64], cell: impl Fn(i32) -> (f64, bool)) -> (usize, f64) {
+    let mut hits = [0usize; LANES];
+    let mut drop = [0.0f64; LANES];
+    let mut chunks = row.chunks_exact_mut(LANES);
+    let mut base = 0i32;
+    for chunk in &mut chunks {
+        for l in 0..LANES {
+            let c = chunk[l];
+            let (z, inside) = cell(base + l as i32);
+            hits[l] += inside as usize;
+            let d = if inside { c - z } else { 0.0 };
+            drop[l] = if d > drop[l] { d } else { drop[l] };
+            chunk[l] = if inside & (z < c) { z } else { c };
+        }
+        base += LANES as i32;
+    }
+    for (l, c) in chunks.into_remainder().iter_mut().enumerate() {
+        let (z, inside) = cell(base + l as i32);
+        hits[l] += inside as usize;
+        let d = if inside { *c - z } else { 0.0 };
+        drop[l] = if d > drop[l] { d } else { drop[l] };
+        *c = if inside & (z < *c) { z } else { *c };
+    }
+    (
+        hits.iter().sum(),
+        drop.iter().fold(0.0, |m, &d| if d > m { d } else { m }),
+    )
 }
 
 #[cfg(test)]
