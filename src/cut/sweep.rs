@@ -23,7 +23,10 @@
 //!   ball of radius `rc` at the distance `h − R0` (near the bull's for a thin flat such as a runout's), with
 //!   certified lower bounds (tangents of the convex `f`), stopped when a bound is within
 //!   [`BULL_TOLERANCE_MM`] of the best value found; the value returned is the best found, never below the
-//!   true minimum and at most that tolerance above it.
+//!   true minimum and at most that tolerance above it. Before solving, a closed-form lower bound (the ball of
+//!   radius `rc` at the distance to the flat's bounding square, `Sweep::bull_floor`) and the ends of the
+//!   interval are worked out for a block of cells at once, with vector instructions; only cells the bound
+//!   says the sweep may lower, with the minimum inside the interval, are solved.
 //!
 //! A segment whose horizontal length is below [`VERTICAL_MM`] is taken as vertical (a plunge or a retract):
 //! the lowest point is then the lower end's.
@@ -268,38 +271,55 @@ impl Sweep {
                 });
             }
             Shape::Bull { .. } => {
-                for (i, cell) in row.iter_mut().enumerate() {
-                    let ex = ex0 + i as f64 * pitch;
-                    let ed = ex * dx + eyd;
-                    let tp = ed * inv_l2;
-                    let h2 = (ex * ex + ey2 - ed * tp).max(0.0);
-                    let rp2 = r2 - h2;
-                    if rp2 < 0.0 {
-                        continue;
+                // two passes over each block of cells: without branches, the interval of `t` over which the
+                // bit covers the cell and the floor of the sweep there; then the solve, only where the floor
+                // is below the cell (most of a dense raster's neighbouring passes it cannot lower)
+                let mut base = 0i32;
+                for chunk in row.chunks_mut(LANES) {
+                    let n = chunk.len();
+                    let mut cells = [f64::INFINITY; LANES];
+                    cells[..n].copy_from_slice(chunk);
+                    let mut at = [[0.0f64; 2]; LANES];
+                    let mut ends = [[0.0f64; 6]; LANES];
+                    let mut need = [false; LANES];
+                    let l2 = self.l2();
+                    for l in 0..LANES {
+                        let ex = ex0 + f64::from(base + l as i32) * pitch;
+                        let ed = ex * dx + eyd;
+                        let tp = ed * inv_l2;
+                        let h2 = (ex * ex + ey2 - ed * tp).max(0.0);
+                        let rp2 = r2 - h2;
+                        let w = rp2.max(0.0).sqrt() * inv_l;
+                        let (lo, hi) = ((tp - w).max(0.0), (tp + w).min(1.0));
+                        let inside = (rp2 >= 0.0) & (lo <= hi) & (l < n);
+                        hits += inside as usize;
+                        need[l] = inside & (self.bull_floor(h2, tp, lo, hi) < cells[l]);
+                        let ((fa, da, _), (fb, db, _)) =
+                            (self.bull_eval(h2, tp, l2, lo), self.bull_eval(h2, tp, l2, hi));
+                        at[l] = [h2, tp];
+                        ends[l] = [lo, fa, da, hi, fb, db];
                     }
-                    let w = rp2.sqrt() * inv_l;
-                    let (lo, hi) = ((tp - w).max(0.0), (tp + w).min(1.0));
-                    if lo > hi {
-                        continue;
+                    for (l, cell) in chunk.iter_mut().enumerate() {
+                        if need[l] {
+                            let [h2, tp] = at[l];
+                            let z = match Sweep::bull_at_ends(ends[l]) {
+                                Ok(z) => z,
+                                Err(e) => self.bull_interior(h2, tp, e),
+                            };
+                            drop = drop.max(*cell - z);
+                            if z < *cell {
+                                *cell = z;
+                            }
+                        }
                     }
-                    hits += 1;
-                    // a cell that a lower bound of the sweep cannot lower is left without solving (most of a
-                    // dense raster's neighbouring passes)
-                    if self.bull_floor(h2, tp, lo, hi) >= *cell {
-                        continue;
-                    }
-                    let z = self.bull_min(h2, tp, lo, hi);
-                    drop = drop.max(*cell - z);
-                    if z < *cell {
-                        *cell = z;
-                    }
+                    base += LANES as i32;
                 }
             }
         }
         (hits, drop)
     }
 
-    /// A lower bound of [`Sweep::bull_min`] in closed form, less [`BULL_FLOOR_SLACK_MM`].
+    /// A lower bound of the bull's sweep (the minimum of `f`, [`Sweep::bull_interior`]) in closed form, less [`BULL_FLOOR_SLACK_MM`].
     ///
     /// The bull is the ball of radius `rc` widened by the flat's disc of radius `R0`, so with `v = (h, L u)`
     /// the point's offset from the tip in the segment's frame, `ρ − R0 = |v| − R0` is its distance to that
@@ -324,44 +344,47 @@ impl Sweep {
         let r0 = self.r - rc;
         let hp = (h2.sqrt() - r0).max(0.0);
         let rp = (rc * rc - hp * hp).max(0.0).sqrt();
-        // `ρ(t) ≥ h` and `prof` is non-decreasing: `f ≥ z(lo) + prof(h)`
+        // `ρ(t) ≥ h` and `prof` is non-decreasing: `f ≥ z(lo) + prof(h)`, all a vertical segment has
         let weak = az + lo * dz + rc - rp;
-        if self.inv_l <= 0.0 {
-            return weak - BULL_FLOOR_SLACK_MM;
-        }
+        // (selects throughout, so that the row's first pass compiles to vector instructions; what a select
+        // discards may be NaN)
         let l = 1.0 / self.inv_l;
         let w0 = r0 * self.inv_l;
         // the band |u| ≤ w0 and beyond it
         let tm = (tp - w0).max(lo);
-        let mut bound = if tm <= hi {
+        let band = if tm <= hi {
             az + tm * dz + rc - rp
         } else {
             f64::INFINITY
         };
         // the ball behind the band
         let tl = (tp - w0).min(hi);
-        if lo <= tl {
-            let ts = (tp - w0 - rp * self.c1).clamp(lo, tl);
-            let e = l * (ts - tp + w0);
-            let q = rp * rp - e * e;
-            bound = bound.min(if q >= 0.0 { az + ts * dz + rc - q.sqrt() } else { weak });
-        }
+        let ts = (tp - w0 - rp * self.c1).max(lo).min(tl);
+        let e = l * (ts - tp + w0);
+        let q = rp * rp - e * e;
+        let behind = if lo <= tl {
+            if q >= 0.0 {
+                az + ts * dz + rc - q.sqrt()
+            } else {
+                weak
+            }
+        } else {
+            f64::INFINITY
+        };
         // the band wholly before the interval
-        if tp + w0 < lo {
-            let e = l * (lo - tp - w0);
-            let q = rp * rp - e * e;
-            bound = bound.min(if q >= 0.0 { az + lo * dz + rc - q.sqrt() } else { weak });
-        }
-        bound.max(weak) - BULL_FLOOR_SLACK_MM
-    }
-
-    /// Minimum of the convex `f(t) = z(t) + prof(ρ(t))` over `[lo, hi]`: at an end ([`Sweep::bull_ends`]) or
-    /// inside ([`Sweep::bull_interior`]).
-    fn bull_min(&self, h2: f64, tp: f64, lo: f64, hi: f64) -> f64 {
-        match self.bull_ends(h2, tp, lo, hi) {
-            Ok(z) => z,
-            Err(e) => self.bull_interior(h2, tp, e),
-        }
+        let e = l * (lo - tp - w0);
+        let q = rp * rp - e * e;
+        let before = if tp + w0 < lo {
+            if q >= 0.0 {
+                az + lo * dz + rc - q.sqrt()
+            } else {
+                weak
+            }
+        } else {
+            f64::INFINITY
+        };
+        let sloped = band.min(behind).min(before).max(weak);
+        (if self.inv_l > 0.0 { sloped } else { weak }) - BULL_FLOOR_SLACK_MM
     }
 
     /// `(f, f', f'')` of the bull's `f(t) = z(t) + prof(ρ(t))` at `t`, `l2 = L²`.
@@ -419,19 +442,18 @@ impl Sweep {
         }
     }
 
-    /// The minimum when it lies at an end of `[lo, hi]` (`f' ≥ 0` at `lo`, or `≤ 0` at `hi`: `f` is convex);
-    /// otherwise the ends' `(t, f, f')`, a bracket of the minimum.
+    /// The minimum of the convex `f` over `[lo, hi]` when it lies at an end (`f' ≥ 0` at `lo`, or `≤ 0` at
+    /// `hi`), from the ends' `e = [lo, f(lo), f'(lo), hi, f(hi), f'(hi)]`; otherwise `e`, a bracket of it.
     #[inline(always)]
-    fn bull_ends(&self, h2: f64, tp: f64, lo: f64, hi: f64) -> Result<f64, [f64; 6]> {
-        let l2 = self.l2();
-        let ((fa, da, _), (fb, db, _)) = (self.bull_eval(h2, tp, l2, lo), self.bull_eval(h2, tp, l2, hi));
+    fn bull_at_ends(e: [f64; 6]) -> Result<f64, [f64; 6]> {
+        let [lo, fa, da, hi, fb, db] = e;
         if hi - lo <= 0.0 || da >= 0.0 {
             return Ok(fa);
         }
         if db <= 0.0 {
             return Ok(fb);
         }
-        Err([lo, fa, da, hi, fb, db])
+        Err(e)
     }
 
     /// The first Newton point: the stationary point of the ball of radius `rc` at the distance `h − R0` (the
@@ -448,7 +470,7 @@ impl Sweep {
         }
     }
 
-    /// Minimum of the convex `f(t) = z(t) + prof(ρ(t))` inside the bracket `e` of [`Sweep::bull_ends`]: Newton's
+    /// Minimum of the convex `f(t) = z(t) + prof(ρ(t))` inside the bracket `e` of [`Sweep::bull_at_ends`]: Newton's
     /// method on `f'` from [`Sweep::bull_start`], safeguarded by the bracket `[a, b]` on the sign of `f'` (a
     /// step that leaves it, or does not halve it twice running, is a bisection). Certified by two lower bounds
     /// of the convex `f` ([`bull_certified`]); the value returned is the best found, never below the true
