@@ -294,6 +294,8 @@ fn simulate(gcode: &str, m: &Machine) -> brdfmill::stages::simulate::Simulation 
         // what the program commands: a perfect machine (the profile's backlash and runout cut below any
         // program, and are the machine's, not the toolpath's; tests/machine_accuracy.rs checks those)
         ideal: true,
+        // each tool's own cut, for the gouge check per tool
+        tool_cuts: true,
         ..Default::default()
     };
     simulate::run(gcode, &cfg).unwrap()

@@ -89,6 +89,8 @@ pub fn config(a: &Args) -> Result<SimulateConfig> {
         tools: machine.as_ref().map(simulate::tool_table).unwrap_or_default(),
         machine,
         ideal: a.ideal,
+        // the gouge check per tool needs each tool's own cut
+        tool_cuts: a.design.is_some(),
         ..Default::default()
     })
 }

@@ -118,6 +118,10 @@ pub struct SimulateConfig {
     /// Cut as a perfect machine would, whatever `machine` declares (the `milled_ideal` figures).
     #[serde(default)]
     pub ideal: bool,
+    /// Also cut each tool's program alone from the stock top ([`Simulation::tool_cuts`], for a gouge check
+    /// per tool), when the program uses more than one tool: a second sweep of every tool but the first.
+    #[serde(skip)]
+    pub tool_cuts: bool,
 }
 
 impl Default for SimulateConfig {
@@ -135,6 +139,7 @@ impl Default for SimulateConfig {
             flute_length_mm: 0.0,
             machine: None,
             ideal: false,
+            tool_cuts: false,
         }
     }
 }
@@ -295,7 +300,8 @@ pub struct Simulation {
     pub origin_mm: [f64; 2],
     /// The numbers.
     pub stats: SimStats,
-    /// Each tool's own cut, when the program uses more than one tool.
+    /// Each tool's own cut, when the program uses more than one tool and [`SimulateConfig::tool_cuts`] asks
+    /// for them.
     #[serde(default, skip)]
     pub tool_cuts: Vec<ToolCut>,
 }
@@ -566,9 +572,9 @@ pub fn simulate(prog: &Motion, cfg: &SimulateConfig) -> Result<Simulation, Simul
 
 /// Sweep each tool's segments with its own shape, in program order, the stock carried from one tool to the
 /// next. Returns the heights, a report whose `rapid_cuts` are program *lines* and whose `cut_segments` index
-/// `prog.segments` (each measured against the stock as it stood when the segment ran), and each tool's own
-/// cut when there is more than one tool (the first tool's is the stock it left; each later one's is swept
-/// again from the top, the one extra sweep a program with several tools costs).
+/// `prog.segments` (each measured against the stock as it stood when the segment ran), and, when
+/// `cfg.tool_cuts` asks and there is more than one tool, each tool's own cut (the first tool's is the stock
+/// it left; each later one's is swept again from the top, the one extra sweep this costs).
 fn sweep_tools(
     grid: &stock::Grid,
     top: f64,
@@ -603,6 +609,9 @@ fn sweep_tools(
         rep.rapid_cuts
             .extend(r.rapid_cuts.iter().map(|&k| segs[k].line as usize));
         rep.cut_segments.extend(r.cut_segments.iter().map(|&k| index[k]));
+        if !cfg.tool_cuts {
+            continue;
+        }
         let own = if t == 0 {
             z.clone()
         } else {
