@@ -150,11 +150,12 @@ impl Sweep {
         let (bx, by) = (self.ax + self.dx, self.ay + self.dy);
         let dy = (self.ay.min(by) - y).max(y - self.ay.max(by)).max(0.0);
         let dx = (self.ax.min(bx) - x_hi).max(x_lo - self.ax.max(bx)).max(0.0);
-        let d = (dx * dx + dy * dy).sqrt();
-        if d > self.r {
+        // (from the squared distance: a ball's profile then takes one square root, not two)
+        let d2 = dx * dx + dy * dy;
+        if d2 > self.r2 {
             f64::INFINITY
         } else {
-            self.az + self.bit.profile(d)
+            self.az + self.bit.profile_sq(d2)
         }
     }
 
