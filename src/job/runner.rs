@@ -300,8 +300,10 @@ fn machine_effects(
     for (name, acc, alone) in each {
         let mut machine = ready.toolpath.machine.clone();
         machine.accuracy = Some(acc);
+        // measured by its surface only, so swept deepest first
         let cfg = crate::stages::simulate::SimulateConfig {
             machine: Some(machine),
+            surface_only: true,
             ..base.clone()
         };
         let sim = crate::stages::simulate::run_files(programs, &cfg).map_err(stage_err("simulate"))?;

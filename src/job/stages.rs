@@ -95,8 +95,10 @@ pub(super) fn program_and_cut(
     let (sim, dev, figures) = simulate_stage(ready, shape, &program, design, design_file, o)?;
     let sim_ideal = match sim.stats.accuracy {
         Some(_) => {
+            // measured by its surface only (`milled_ideal`), so swept deepest first
             let cfg = crate::stages::simulate::SimulateConfig {
                 ideal: true,
+                surface_only: true,
                 ..ready.job.simulate.config(&ready.toolpath)
             };
             Some(simulate::run_files(&program.texts(), &cfg).map_err(stage_err("simulate"))?)

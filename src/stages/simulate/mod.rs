@@ -122,6 +122,14 @@ pub struct SimulateConfig {
     /// per tool), when the program uses more than one tool: a second sweep of every tool but the first.
     #[serde(skip)]
     pub tool_cuts: bool,
+    /// Only the milled surface: every tool's segments swept deepest first, the last tool first. The surface
+    /// is the minimum over every sweep, whatever their order, so it is the same to the bit, and much cheaper
+    /// (a roughing pass the finishing cut below is skipped after one compare per row); what needs program
+    /// order is not measured (the air, the rapids that cut and the cutting segments are left at zero). For
+    /// the job's comparison cuts (a perfect machine, each error alone), which are measured only by their
+    /// surface.
+    #[serde(skip)]
+    pub surface_only: bool,
 }
 
 impl Default for SimulateConfig {
@@ -140,6 +148,7 @@ impl Default for SimulateConfig {
             machine: None,
             ideal: false,
             tool_cuts: false,
+            surface_only: false,
         }
     }
 }
@@ -588,6 +597,22 @@ fn sweep_tools(
             numbers.push(s.tool);
         }
     }
+    if cfg.surface_only {
+        let mut z = vec![top; grid.nx * grid.ny];
+        for &n in numbers.iter().rev() {
+            let segs: Vec<gcode::Segment> = prog.segments.iter().filter(|s| s.tool == n).copied().collect();
+            stock::sweep_into(
+                grid,
+                &mut z,
+                top,
+                cfg.shape_of(n),
+                &segs,
+                stock::Order::DeepestFirst,
+                |_, _| {},
+            );
+        }
+        return (z, stock::SweepReport::default(), vec![]);
+    }
     if numbers.len() <= 1 {
         let n = numbers.first().copied().unwrap_or(0);
         let (z, mut rep) = stock::sweep(grid, top, cfg.shape_of(n), &prog.segments);
@@ -728,6 +753,49 @@ mod tests {
         let (lo, _) = s.heightfield.range();
         assert!((lo + 0.1).abs() < 1e-12, "{lo} {:?}", s.stats);
         assert!(s.stats.estimated_s > 0.0 && s.stats.machine.contains("assumed"));
+    }
+
+    /// The surface alone (deepest first, the last tool first) is the program-order cut to the bit: a roughing
+    /// ball, then a finishing ball with runout (a bull-nose envelope), on a machine with backlash.
+    #[test]
+    fn the_surface_alone_is_the_program_order_cut() {
+        let mut machine = crate::cut::machine::Machine::load(
+            &std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("machines/grbl-3018.toml"),
+        )
+        .unwrap();
+        machine.accuracy = Some(crate::cut::accuracy::Accuracy {
+            backlash_um: [25.0, 25.0, 0.0],
+            runout_um: 15.0,
+            ..crate::cut::accuracy::Accuracy::PERFECT
+        });
+        // two programs, as a GRBL job has them (GRBL cannot change tools: `T` names the bit)
+        let rough = "G21 G90\nT1\nG0 X0 Y0 Z1\nG1 Z-0.3 F300\nX2 Y0.2\nY1.2\nX0 Y1\nG0 Z1\n";
+        let finish =
+            "G21 G90\nT2\nG0 X0 Y0.1 Z1\nG1 Z-0.45 F100\nX2 Y0.3 Z-0.35\nG2 X2 Y1.1 I0 J0.4\nG1 X0.2 Y0.9 Z-0.5\nG0 Z1\n";
+        let program = [rough, finish];
+        let cfg = SimulateConfig {
+            pitch_um: 10.0,
+            bounds_mm: Some([-1.0, -1.0, 3.0, 2.5]),
+            tools: [
+                (1, Shape::Ball { diameter_mm: 2.0 }),
+                (2, Shape::Ball { diameter_mm: 0.5 }),
+            ]
+            .into(),
+            machine: Some(machine),
+            ..Default::default()
+        };
+        let full = run_files(&program, &cfg).unwrap();
+        assert!(full.stats.cutting_segments > 0);
+        let alone = run_files(
+            &program,
+            &SimulateConfig {
+                surface_only: true,
+                ..cfg.clone()
+            },
+        )
+        .unwrap();
+        assert_eq!(full.heightfield.z_mm, alone.heightfield.z_mm);
+        assert!(full.heightfield.range().0 < -0.4);
     }
 
     #[test]
