@@ -273,8 +273,10 @@ impl Sweep {
             }
             Shape::Bull { .. } => {
                 // two passes over each block of cells: without branches, the interval of `t` over which the
-                // bit covers the cell and the floor of the sweep there; then the solve, only where the floor
-                // is below the cell (most of a dense raster's neighbouring passes it cannot lower)
+                // bit covers the cell, the floor of the sweep there and `f` at the interval's ends; then the
+                // solve, only where the floor is below the cell (most of a dense raster's neighbouring passes
+                // it cannot lower) and the minimum is not at an end
+                let l2 = self.l2();
                 let mut base = 0i32;
                 for chunk in row.chunks_mut(LANES) {
                     let n = chunk.len();
@@ -283,7 +285,6 @@ impl Sweep {
                     let mut at = [[0.0f64; 2]; LANES];
                     let mut ends = [[0.0f64; 6]; LANES];
                     let mut need = [false; LANES];
-                    let l2 = self.l2();
                     for l in 0..LANES {
                         let ex = ex0 + f64::from(base + l as i32) * pitch;
                         let ed = ex * dx + eyd;
