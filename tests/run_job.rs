@@ -517,6 +517,26 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         "{stock}"
     );
     assert!(html[sheet..].contains("touch-off pad") && html[sheet..].contains("brdfmill stream program-1.nc"));
+    // GRBL cuts arcs as chords of at least its `$12`: the sheet counts the programs' arcs (counted here from
+    // their text: a block with a centre offset) and names the `$12` the simulation assumed
+    let arcs = texts
+        .iter()
+        .flat_map(|t| t.lines())
+        .filter(|l| {
+            l.split_whitespace()
+                .any(|w| matches!(w.as_bytes()[0], b'I' | b'J' | b'K' | b'R'))
+        })
+        .count();
+    assert!(arcs > 0);
+    let row = html[sheet..]
+        .split("<th>arcs</th><td>")
+        .nth(1)
+        .and_then(|t| t.split("</td>").next())
+        .expect("an arcs row");
+    assert!(
+        row.starts_with(&format!("{arcs} arcs")) && row.contains("0.002 mm"),
+        "{row}"
+    );
     assert!(
         html[sheet..].contains("57296 rpm"),
         "the sheet names the speed the finishing ball would need"

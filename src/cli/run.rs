@@ -172,7 +172,7 @@ fn summary(a: &Args, t: &brdfmill::stages::toolpath::ToolpathConfig, outcome: &j
         );
     }
     for (k, v) in &outcome.setup {
-        if matches!(k.as_str(), "stock" | "work zero" | "check, then run") {
+        if matches!(k.as_str(), "stock" | "work zero" | "arcs" | "check, then run") {
             println!("{:<9} {v}", k.split(',').next().unwrap_or(k));
         }
     }

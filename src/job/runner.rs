@@ -261,7 +261,13 @@ fn verify_single(
     let mut figures = v.figures;
     figures.extend(designed.figures);
     figures.extend(sim_figures);
-    outcome.setup = super::setup::sheet(ready, &program.summary, outcome.relief_mm.unwrap_or(0.0), &dev);
+    outcome.setup = super::setup::sheet(
+        ready,
+        &program.summary,
+        outcome.relief_mm.unwrap_or(0.0),
+        &dev,
+        sim.stats.arcs,
+    );
     let html = report::Report {
         title: job.name.clone(),
         verdict: report::Verdict::Single(&v.metrics),
@@ -413,7 +419,7 @@ fn verify_regions(
     figures.extend(design_figures);
     figures.extend(sim_figures);
     let ndfs: Vec<&crate::stages::ndf::Ndf> = run.nds.iter().map(|n| &n.ndf).collect();
-    outcome.setup = super::setup::sheet(ready, &program.summary, composed.relief_mm, &dev);
+    outcome.setup = super::setup::sheet(ready, &program.summary, composed.relief_mm, &dev, sim.stats.arcs);
     let html = report::Report {
         title: job.name.clone(),
         verdict: report::Verdict::Regions(&metrics),

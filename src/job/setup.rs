@@ -76,7 +76,7 @@ fn tool_line(tool: &Tool, c: &ToolData, depth_mm: f64) -> (String, Vec<String>) 
 }
 
 /// The sheet's rows (the report's "To mill this" table).
-pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation) -> Vec<(String, String)> {
+pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation, arcs: usize) -> Vec<(String, String)> {
     let t = &ready.job.toolpath;
     // the tools in the order the programs use them, with their data as the programs use them
     let tools: Vec<(&Tool, &ToolData)> = s
@@ -157,6 +157,9 @@ pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation)
             rows.push((format!("T{} cutting data", tool.number), findings.join("; ")));
         }
     }
+    if let Some(row) = arc_advice(ready, arcs) {
+        rows.push(row);
+    }
     rows.extend([
         ("check, then run".into(), run_advice(dialect, s)),
         (
@@ -169,6 +172,32 @@ pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation)
     ]);
     rows.extend(numbers(s, dev));
     rows
+}
+
+/// What a GRBL controller does to the programs' arcs, and which `$12` the verdict assumed (docs/MACHINE.md §3.1):
+/// GRBL cuts an arc as `⌊½θr/√(t(2r−t))⌋` chords at its arc tolerance `t` (`$12`), so every chord sags by at
+/// least `t`; the simulation cut the arcs so. `arcs`: the programs' `G2`/`G3` blocks (as the simulation read
+/// them). None when the controller follows arcs exactly, or there are none.
+fn arc_advice(ready: &Ready, arcs: usize) -> Option<(String, String)> {
+    let m = &ready.machine;
+    let profile_mm = m.limits.arc_chord_mm(m.dialect)?;
+    if arcs == 0 {
+        return None;
+    }
+    let simulated_mm = ready.job.simulate.config(&ready.toolpath).arc_tolerance_um * 1e-3;
+    let assumed = if (simulated_mm - profile_mm).abs() <= 1e-12 {
+        format!("`$12` = {profile_mm} mm, the profile's")
+    } else {
+        format!("chords of {simulated_mm} mm (`simulate.arc_tolerance_um`; the profile's `$12` is {profile_mm} mm)")
+    };
+    Some((
+        "arcs".into(),
+        format!(
+            "{arcs} arcs (G2/G3): GRBL cuts each as chords that stand at least its `$12` inside the arc (below it over a crest), and the \
+             simulated cut the verdict measured assumed {assumed}. Read `$12` with `$$` before running: set \
+             coarser, it cuts the arcs further from the design than the verdict saw; finer (0.0005), closer"
+        ),
+    ))
 }
 
 /// How to check and run the programs on the dialect's controller.
