@@ -72,8 +72,9 @@ pub const VERTICAL_MM: f64 = 1e-7;
 /// Largest amount by which a bull-nose sweep height may exceed the exact minimum, mm (1 pm).
 pub const BULL_TOLERANCE_MM: f64 = 1e-9;
 
-/// What [`Sweep::bull_floor`] stands below its closed form, mm (20 pm): the rounding of its square roots
-/// near the rim, so that a cell it skips is one the exact minimum would not lower by more than a hair.
+/// What the bull's floor (`Sweep::bull_floor`, the row's lower bound of its sweep) stands below its closed
+/// form, mm (20 pm): the rounding of its square roots near the rim, so that a cell it skips is one the exact
+/// minimum would not lower by more than a hair.
 pub const BULL_FLOOR_SLACK_MM: f64 = 2e-8;
 
 /// A cell counts as lowered by a segment (for the report of rapids that cut) only when by more than this, mm
@@ -321,7 +322,8 @@ impl Sweep {
         (hits, drop)
     }
 
-    /// A lower bound of the bull's sweep (the minimum of `f`, [`Sweep::bull_interior`]) in closed form, less [`BULL_FLOOR_SLACK_MM`].
+    /// A lower bound of the bull's sweep (the minimum of `f`, [`Sweep::bull_interior`]) in closed form, less
+    /// [`BULL_FLOOR_SLACK_MM`].
     ///
     /// The bull is the ball of radius `rc` widened by the flat's disc of radius `R0`, so with `v = (h, L u)`
     /// the point's offset from the tip in the segment's frame, `ρ − R0 = |v| − R0` is its distance to that
@@ -391,8 +393,9 @@ impl Sweep {
 
     /// `(f, f', f'')` of the bull's `f(t) = z(t) + prof(ρ(t))` at `t`, `l2 = L²`.
     ///
-    /// With `s = ρ − R0 > 0` and `q = rc² − s²`: `prof' = s / √q`, `prof'' = rc² / q^{3/2}`; `ρ' = L²(t − t_p)/ρ`,
-    /// `ρ'' = L² h² / ρ³`; `f' = dz + prof'·ρ'`, `f'' = prof''·ρ'² + prof'·ρ''` (both 0 on the flat, `s ≤ 0`).
+    /// With `s = ρ − R0 > 0` and `q = rc² − s²`: `prof' = s / √q`, `prof'' = rc² / q^{3/2}`;
+    /// `ρ' = L²(t − t_p)/ρ`, `ρ'' = L² h² / ρ³`; `f' = dz + prof'·ρ'`, `f'' = prof''·ρ'² + prof'·ρ''` (both 0 on
+    /// the flat, `s ≤ 0`).
     #[inline(always)]
     fn bull_eval(&self, h2: f64, tp: f64, l2: f64, t: f64) -> (f64, f64, f64) {
         let (r0, rc) = self.bull_radii();
@@ -694,7 +697,10 @@ mod tests {
                 for above in [1e-7, 1e-4] {
                     let mut cell = [exact + above];
                     s.row(q[1], q[0], 0.0, &mut cell);
-                    prop_assert!(cell[0] <= exact + BULL_TOLERANCE_MM, "a cell {above} mm above the minimum was skipped");
+                    prop_assert!(
+                        cell[0] <= exact + BULL_TOLERANCE_MM,
+                        "a cell {above} mm above the minimum was skipped"
+                    );
                 }
             }
         }

@@ -193,8 +193,8 @@ fn arc_advice(ready: &Ready, arcs: usize) -> Option<(String, String)> {
     Some((
         "arcs".into(),
         format!(
-            "{arcs} arcs (G2/G3): GRBL cuts each as chords that stand at least its `$12` inside the arc (below it over a crest), and the \
-             simulated cut the verdict measured assumed {assumed}. Read `$12` with `$$` before running: set \
+            "{arcs} arcs (G2/G3): GRBL cuts each as chords that stand at least its `$12` inside the arc (below \
+             it over a crest), and the simulated cut the verdict measured assumed {assumed}. Read `$12` with `$$` before running: set \
              coarser, it cuts the arcs further from the design than the verdict saw; finer (0.0005), closer"
         ),
     ))
