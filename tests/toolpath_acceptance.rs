@@ -655,3 +655,54 @@ fn rs274_accepts_every_program() {
         }
     }
 }
+
+/// On a machine with backlash the final raster runs one way, and so must the intermediate finishing levels:
+/// a level run the other way is shifted by the whole backlash against the final passes, and where it rides
+/// at the final cutter location it gouges by backlash × slope (docs/MACHINE.md §5). Measured on the program
+/// text along the passes (X, at angle 0), on the feeds that do not descend (an entry ramp's back-and-forth
+/// descends at every move).
+#[test]
+fn on_a_machine_with_backlash_the_finishing_levels_run_one_way_with_the_final_passes() {
+    let m = machine("grbl-3018.toml");
+    assert!(m.has_backlash());
+    let p = program("grbl-3018.toml", "flat3", &pocket(1.2));
+    let word = |l: &str, c: char| {
+        l.split_whitespace()
+            .find_map(|w| w.strip_prefix(c))
+            .and_then(|v| v.parse::<f64>().ok())
+    };
+    let (mut at, mut feed, mut level) = ([0.0f64; 2], false, false);
+    let (mut with, mut against, mut final_minus, mut final_plus) = (0.0, 0.0, 0.0, 0.0);
+    for l in p.gcode.lines() {
+        match l {
+            "(finishing: intermediate level)" => level = true,
+            "(finishing)" | "(roughing layer)" => level = false,
+            _ => {}
+        }
+        for w in l.split_whitespace() {
+            match w {
+                "G0" => feed = false,
+                "G1" | "G2" | "G3" => feed = true,
+                _ => {}
+            }
+        }
+        let to = [word(l, 'X').unwrap_or(at[0]), word(l, 'Z').unwrap_or(at[1])];
+        let d = to[0] - at[0];
+        if feed && to[1] >= at[1] && d != 0.0 {
+            match (level, d < 0.0) {
+                (true, true) => with -= d,
+                (true, false) => against += d,
+                (false, true) => final_minus -= d,
+                (false, false) => final_plus += d,
+            }
+        }
+        at = to;
+    }
+    // the final raster (and the roughing before it, counted with it) cuts along −X
+    assert!(
+        final_minus > 5.0 * final_plus,
+        "final: {final_minus:.1} mm −X, {final_plus:.1} mm +X"
+    );
+    assert!(with > 1.0, "the pocket needs levels ({with:.2} mm of them)");
+    assert!(against < 0.05 * with, "levels: {with:.1} mm −X, {against:.1} mm +X");
+}

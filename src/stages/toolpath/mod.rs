@@ -440,6 +440,7 @@ fn program(plan: &ToolpathPlan, tile: &Heightfield) -> Result<Toolpath, Toolpath
             feed,
             tol,
             arcs: cfg.arcs,
+            strategy,
         })
     };
     let finish_side = || {

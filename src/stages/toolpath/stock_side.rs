@@ -32,6 +32,10 @@ pub(super) struct StockSide<'a> {
     pub(super) tol: f64,
     /// Fit `G2`/`G3` arcs to the finishing levels' runs too (`toolpath.arcs`).
     pub(super) arcs: bool,
+    /// The final raster's strategy: one-way final passes make one-way levels too, in the same direction, so
+    /// that a machine's backlash shifts both alike (levels run both ways ride at the final cutter location
+    /// where the stock allows, and there a shift against the final raster's gouges by backlash × slope).
+    pub(super) strategy: super::Strategy,
 }
 
 /// The program up to the final finishing raster.
@@ -216,6 +220,7 @@ fn intermediate_levels(
     stock: &mut Heightfield,
 ) -> Result<(usize, Vec<Vec<f64>>), ToolpathError> {
     let (design, dc, vs, finals) = (s.design, s.dc, s.vs, s.raw);
+    let oneway = matches!(s.strategy, super::Strategy::Oneway);
     let (doc, stepover, feed, tol) = (s.cut.max_depth_of_cut_mm, s.stepover, s.feed, s.tol);
     let gap_points = (LEVEL_GAP_DIAMETERS * dc.cutter().diameter_mm() / design.hf.pitch_mm).ceil() as usize;
     let relief = -finals.iter().flatten().map(|p| p[2]).fold(0.0, f64::min);
@@ -256,7 +261,8 @@ fn intermediate_levels(
                 .map(|(f, s)| [f[0], f[1], f[2].max(s.min(0.0) - doc)])
                 .collect();
             let mut cut: Vec<bool> = f.iter().zip(s).map(|(f, s)| over(f, *s) > doc + 1e-6).collect();
-            if r % 2 == 1 {
+            // oriented as the final raster's pass on this row (`finishing_passes`)
+            if oneway || r % 2 == 1 {
                 pts.reverse();
                 cut.reverse();
                 scl.reverse();
