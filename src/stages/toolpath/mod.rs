@@ -43,6 +43,16 @@ pub enum Strategy {
     Oneway,
 }
 
+impl Strategy {
+    /// Whether row `k` of the raw CL rows (ascending u) runs reversed: every row one-way (−u, climb for
+    /// `M3`), every other row zigzag. The final passes and the intermediate finishing levels share it, so
+    /// that a machine's backlash shifts both alike.
+    #[must_use]
+    pub fn reverses(self, k: usize) -> bool {
+        self == Strategy::Oneway || k % 2 == 1
+    }
+}
+
 /// Configuration of the toolpath stage. Lengths carry their unit in the name.
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -314,7 +324,7 @@ fn finishing_passes(raw: &[Vec<P3>], strategy: Strategy, tol: f64, q: f64, arcs_
         .enumerate()
         .map(|(k, pass)| {
             let mut raw: Vec<P3> = pass.clone();
-            if matches!(strategy, Strategy::Oneway) || k % 2 == 1 {
+            if strategy.reverses(k) {
                 raw.reverse();
             }
             let plane = if arcs_on { arcs::pass_plane(&raw) } else { None };
@@ -368,7 +378,7 @@ fn finishing(
         if pass.pts.is_empty() {
             continue;
         }
-        let reversed = matches!(strategy, Strategy::Oneway) || k % 2 == 1;
+        let reversed = strategy.reverses(k);
         let start_cl = stock_cl
             .get(k)
             .and_then(|s| if reversed { s.last() } else { s.first() })

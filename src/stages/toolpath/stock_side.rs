@@ -219,8 +219,7 @@ fn intermediate_levels(
     s: &StockSide,
     stock: &mut Heightfield,
 ) -> Result<(usize, Vec<Vec<f64>>), ToolpathError> {
-    let (design, dc, vs, finals) = (s.design, s.dc, s.vs, s.raw);
-    let oneway = matches!(s.strategy, super::Strategy::Oneway);
+    let (design, dc, vs, finals, strategy) = (s.design, s.dc, s.vs, s.raw, s.strategy);
     let (doc, stepover, feed, tol) = (s.cut.max_depth_of_cut_mm, s.stepover, s.feed, s.tol);
     let gap_points = (LEVEL_GAP_DIAMETERS * dc.cutter().diameter_mm() / design.hf.pitch_mm).ceil() as usize;
     let relief = -finals.iter().flatten().map(|p| p[2]).fold(0.0, f64::min);
@@ -261,8 +260,8 @@ fn intermediate_levels(
                 .map(|(f, s)| [f[0], f[1], f[2].max(s.min(0.0) - doc)])
                 .collect();
             let mut cut: Vec<bool> = f.iter().zip(s).map(|(f, s)| over(f, *s) > doc + 1e-6).collect();
-            // oriented as the final raster's pass on this row (`finishing_passes`)
-            if oneway || r % 2 == 1 {
+            // oriented as the final raster's pass on this row
+            if strategy.reverses(r) {
                 pts.reverse();
                 cut.reverse();
                 scl.reverse();
