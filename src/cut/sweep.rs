@@ -338,14 +338,8 @@ impl Sweep {
     /// job), hence the slack.
     #[inline(always)]
     fn bull_floor(&self, h2: f64, tp: f64, lo: f64, hi: f64) -> f64 {
-        let Shape::Bull {
-            corner_radius_mm: rc, ..
-        } = self.bit
-        else {
-            unreachable!("bull_floor on a {:?}", self.bit)
-        };
+        let (r0, rc) = self.bull_radii();
         let (az, dz) = (self.az, self.dz);
-        let r0 = self.r - rc;
         let hp = (h2.sqrt() - r0).max(0.0);
         let rp = (rc * rc - hp * hp).max(0.0).sqrt();
         // `ρ(t) ≥ h` and `prof` is non-decreasing: `f ≥ z(lo) + prof(h)`, all a vertical segment has
@@ -354,6 +348,17 @@ impl Sweep {
         // discards may be NaN)
         let l = 1.0 / self.inv_l;
         let w0 = r0 * self.inv_l;
+        // the ball of radius `rc` at distance `h'` from a segment whose foot is `foot`, with its tip at `t`, where
+        // `apply` (`+∞` elsewhere); `weak` where that lands outside its radius
+        let ball = |apply: bool, t: f64, foot: f64| {
+            let e = l * (t - foot);
+            let q = rp * rp - e * e;
+            match (apply, q >= 0.0) {
+                (true, true) => az + t * dz + rc - q.sqrt(),
+                (true, false) => weak,
+                (false, _) => f64::INFINITY,
+            }
+        };
         // the band |u| ≤ w0 and beyond it
         let tm = (tp - w0).max(lo);
         let band = if tm <= hi {
@@ -363,30 +368,9 @@ impl Sweep {
         };
         // the ball behind the band
         let tl = (tp - w0).min(hi);
-        let ts = (tp - w0 - rp * self.c1).max(lo).min(tl);
-        let e = l * (ts - tp + w0);
-        let q = rp * rp - e * e;
-        let behind = if lo <= tl {
-            if q >= 0.0 {
-                az + ts * dz + rc - q.sqrt()
-            } else {
-                weak
-            }
-        } else {
-            f64::INFINITY
-        };
-        // the band wholly before the interval
-        let e = l * (lo - tp - w0);
-        let q = rp * rp - e * e;
-        let before = if tp + w0 < lo {
-            if q >= 0.0 {
-                az + lo * dz + rc - q.sqrt()
-            } else {
-                weak
-            }
-        } else {
-            f64::INFINITY
-        };
+        let behind = ball(lo <= tl, (tp - w0 - rp * self.c1).max(lo).min(tl), tp - w0);
+        // the band wholly before the interval: the ball ahead of it, from `lo`
+        let before = ball(tp + w0 < lo, lo, tp + w0);
         let sloped = band.min(behind).min(before).max(weak);
         (if self.inv_l > 0.0 { sloped } else { weak }) - BULL_FLOOR_SLACK_MM
     }
