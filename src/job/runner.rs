@@ -266,7 +266,7 @@ fn verify_single(
         &program.summary,
         outcome.relief_mm.unwrap_or(0.0),
         &dev,
-        sim.stats.arcs,
+        &sim.stats,
     );
     let html = report::Report {
         title: job.name.clone(),
@@ -419,7 +419,7 @@ fn verify_regions(
     figures.extend(design_figures);
     figures.extend(sim_figures);
     let ndfs: Vec<&crate::stages::ndf::Ndf> = run.nds.iter().map(|n| &n.ndf).collect();
-    outcome.setup = super::setup::sheet(ready, &program.summary, composed.relief_mm, &dev, sim.stats.arcs);
+    outcome.setup = super::setup::sheet(ready, &program.summary, composed.relief_mm, &dev, &sim.stats);
     let html = report::Report {
         title: job.name.clone(),
         verdict: report::Verdict::Regions(&metrics),

@@ -13,7 +13,7 @@ use super::Ready;
 use crate::cut::feeds::ToolData;
 use crate::cut::machine::Tool;
 use crate::gcode::Dialect;
-use crate::stages::simulate::Deviation;
+use crate::stages::simulate::{Deviation, SimStats};
 use crate::stages::toolpath::{self, Summary};
 
 /// Stock beyond the cut on every side, mm.
@@ -76,7 +76,13 @@ fn tool_line(tool: &Tool, c: &ToolData, depth_mm: f64) -> (String, Vec<String>) 
 }
 
 /// The sheet's rows (the report's "To mill this" table).
-pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation, arcs: usize) -> Vec<(String, String)> {
+pub(super) fn sheet(
+    ready: &Ready,
+    s: &Summary,
+    relief_mm: f64,
+    dev: &Deviation,
+    sim: &SimStats,
+) -> Vec<(String, String)> {
     let t = &ready.job.toolpath;
     // the tools in the order the programs use them, with their data as the programs use them
     let tools: Vec<(&Tool, &ToolData)> = s
@@ -157,7 +163,7 @@ pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation,
             rows.push((format!("T{} cutting data", tool.number), findings.join("; ")));
         }
     }
-    if let Some(row) = arc_advice(ready, arcs) {
+    if let Some(row) = arc_advice(ready, sim) {
         rows.push(row);
     }
     rows.extend([
@@ -176,15 +182,17 @@ pub(super) fn sheet(ready: &Ready, s: &Summary, relief_mm: f64, dev: &Deviation,
 
 /// What a GRBL controller does to the programs' arcs, and which `$12` the verdict assumed (docs/MACHINE.md §3.1):
 /// GRBL cuts an arc as `⌊½θr/√(t(2r−t))⌋` chords at its arc tolerance `t` (`$12`), so every chord sags by at
-/// least `t`; the simulation cut the arcs so. `arcs`: the programs' `G2`/`G3` blocks (as the simulation read
-/// them). None when the controller follows arcs exactly, or there are none.
-fn arc_advice(ready: &Ready, arcs: usize) -> Option<(String, String)> {
+/// least `t`; the simulation cut the arcs so. Read from the simulated cut's own record (`sim`: the programs'
+/// `G2`/`G3` blocks as it read them, and the chord tolerance it cut them with). None when the controller
+/// follows arcs exactly, or there are none.
+fn arc_advice(ready: &Ready, sim: &SimStats) -> Option<(String, String)> {
     let m = &ready.machine;
     let profile_mm = m.limits.arc_chord_mm(m.dialect)?;
+    let arcs = sim.arcs;
     if arcs == 0 {
         return None;
     }
-    let simulated_mm = ready.job.simulate.config(&ready.toolpath).arc_tolerance_um * 1e-3;
+    let simulated_mm = sim.arc_tolerance_um * 1e-3;
     let assumed = if (simulated_mm - profile_mm).abs() <= 1e-12 {
         format!("`$12` = {profile_mm} mm, the profile's")
     } else {
