@@ -1,7 +1,8 @@
 //! Triangle soups as binary STL, and the volume a closed one encloses: the output format shared by the exact
-//! facet tile (`facets::stl`) and the simulated cut (`simulate::solid`). Coordinates in mm.
+//! facet tile (`facets::stl`), a refined tile and the simulated cut (`heightfield_solid`). Coordinates in mm.
 
 use crate::base::geometry::Vec3;
+use crate::base::heightfield::Heightfield;
 
 /// A triangle with its three vertices, counter-clockwise seen from outside.
 pub type Triangle = [Vec3; 3];
@@ -31,6 +32,66 @@ pub fn to_binary_stl(tris: &[Triangle], header: &str) -> Vec<u8> {
 /// Signed volume enclosed by a closed, outward-oriented triangle mesh (divergence theorem).
 pub fn volume(tris: &[Triangle]) -> f64 {
     tris.iter().map(|t| t[0].dot(&t[1].cross(&t[2]))).sum::<f64>() / 6.0
+}
+
+/// A heightfield as a closed solid: the top through every `stride`-th sample centre (the stride chosen so
+/// that at most `max_side` samples lie along either side, the last row and column always kept), vertical
+/// sides and a flat bottom `base_mm` below the lowest point. Sample `(i, j)` stands at
+/// `origin + ((i + ½)·pitch, (j + ½)·pitch)`.
+pub fn heightfield_solid(hf: &Heightfield, origin_mm: [f64; 2], max_side: usize, base_mm: f64) -> Vec<Triangle> {
+    let f = hf.nx.max(hf.ny).div_ceil(max_side.max(2)).max(1);
+    let is: Vec<usize> = (0..hf.nx).step_by(f).chain(std::iter::once(hf.nx - 1)).collect();
+    let js: Vec<usize> = (0..hf.ny).step_by(f).chain(std::iter::once(hf.ny - 1)).collect();
+    let dedup = |mut v: Vec<usize>| {
+        v.dedup();
+        v
+    };
+    let (is, js) = (dedup(is), dedup(js));
+    let (lo, _) = hf.range();
+    let zb = lo - base_mm.abs().max(1e-3);
+    let p = hf.pitch_mm;
+    let xy = |a: usize, b: usize| {
+        (
+            origin_mm[0] + (is[a] as f64 + 0.5) * p,
+            origin_mm[1] + (js[b] as f64 + 0.5) * p,
+        )
+    };
+    let top = |a: usize, b: usize| {
+        let (x, y) = xy(a, b);
+        Vec3::new(x, y, hf.at(is[a], js[b]))
+    };
+    let bot = |a: usize, b: usize| {
+        let (x, y) = xy(a, b);
+        Vec3::new(x, y, zb)
+    };
+    let (w, h) = (is.len(), js.len());
+    let mut t = Vec::with_capacity(2 * (w - 1) * (h - 1) + 4 * (w + h) + 8);
+    for b in 0..h.saturating_sub(1) {
+        for a in 0..w.saturating_sub(1) {
+            t.push([top(a, b), top(a + 1, b), top(a + 1, b + 1)]);
+            t.push([top(a, b), top(a + 1, b + 1), top(a, b + 1)]);
+        }
+    }
+    // the boundary, counter-clockwise seen from above
+    let mut ring: Vec<(usize, usize)> = vec![];
+    ring.extend((0..w).map(|a| (a, 0)));
+    ring.extend((1..h).map(|b| (w - 1, b)));
+    ring.extend((0..w - 1).rev().map(|a| (a, h - 1)));
+    ring.extend((1..h - 1).rev().map(|b| (0, b)));
+    for k in 0..ring.len() {
+        let (p, q) = (ring[k], ring[(k + 1) % ring.len()]);
+        // outward side wall: seen from outside, p→q runs left to right along the top
+        t.push([bot(p.0, p.1), bot(q.0, q.1), top(q.0, q.1)]);
+        t.push([bot(p.0, p.1), top(q.0, q.1), top(p.0, p.1)]);
+    }
+    // bottom: a fan from its centre, facing down
+    let c = ring.iter().fold(Vec3::zeros(), |s, &(a, b)| s + bot(a, b)) / ring.len() as f64;
+    for k in 0..ring.len() {
+        let (p, q) = (ring[k], ring[(k + 1) % ring.len()]);
+        t.push([c, bot(q.0, q.1), bot(p.0, p.1)]);
+    }
+    t.retain(|tri| (tri[1] - tri[0]).cross(&(tri[2] - tri[0])).norm() > 0.0);
+    t
 }
 
 #[cfg(test)]

@@ -234,7 +234,7 @@ fn verdict_line(pass: bool, what_passes: &str, notes: &[String], allow_shortfall
 /// Print the figures and the verdict; the exit code.
 fn verdict(m: &brdfmill::stages::verify::Metrics, allow_shortfall: bool) -> i32 {
     println!(
-        "tile      NDF corr {:.4}, L1 {:.4}, JS {:.4}, variance ratio [{:.3}, {:.3}] (facets ⊛ base lobe)",
+        "tile      NDF corr {:.4}, L1 {:.4}, JS {:.4}, variance ratio [{:.3}, {:.3}] (design tile ⊛ base lobe)",
         m.design.ndf_corr, m.design.ndf_l1, m.design.ndf_js, m.design.cov_ratio[0], m.design.cov_ratio[1]
     );
     // a drawn highlight's verdict is its correlation with the image: it goes on the milled line with its bound

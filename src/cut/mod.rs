@@ -9,7 +9,7 @@ pub mod dropcutter;
 pub(crate) mod estimate;
 pub mod feeds;
 pub mod machine;
-pub(crate) mod morphology;
+pub mod morphology;
 pub(crate) mod stock;
 pub mod sweep;
 pub mod tool;

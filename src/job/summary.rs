@@ -70,12 +70,21 @@ pub(super) fn parameters(
         ("relief".into(), relief_line(job, tile)),
         (
             "steps between facets".into(),
-            format!(
-                "{:.1} µm rms, {:.1} µm at most (annealed with the exact step term, weight {})",
-                tile.seams.rms_um,
-                tile.seams.max_interior_um.max(tile.seams.max_seam_um),
-                job.facets.anneal.step_weight
-            ),
+            match tile.refined {
+                Some(r) => format!(
+                    "none: the tile was refined into a continuous surface (iteration {} of {}, on a {:.1} µm grid); the facets it started from stepped by {:.1} µm rms",
+                    r.chosen,
+                    r.iterations,
+                    r.model_pitch_mm * 1e3,
+                    tile.seams.rms_um
+                ),
+                None => format!(
+                    "{:.1} µm rms, {:.1} µm at most (annealed with the exact step term, weight {})",
+                    tile.seams.rms_um,
+                    tile.seams.max_interior_um.max(tile.seams.max_seam_um),
+                    job.facets.anneal.step_weight
+                ),
+            },
         ),
         (
             "arrangement energy".into(),
@@ -150,11 +159,14 @@ pub(super) fn region_parameters(
         rows.push((
             format!("region `{}` ({})", reg.name, crate::stages::svbrdf::hex(reg.color)),
             format!(
-                "{}; {} deconvolution iterations; tile {}; offset {off:+.3} mm in the part; steps {:.1} µm rms",
+                "{}; {} deconvolution iterations; tile {}; offset {off:+.3} mm in the part; {}",
                 n.brdf_spec,
                 n.deconvolution.iterations,
                 relief_line(&ready.job, t),
-                t.seams.rms_um
+                match t.refined {
+                    Some(_) => "refined into a continuous surface".to_string(),
+                    None => format!("steps {:.1} µm rms", t.seams.rms_um),
+                }
             ),
         ));
     }
@@ -180,6 +192,11 @@ fn relief_line(job: &super::Job, tile: &Tile) -> String {
     if budget <= 0.0 {
         return format!("{relief:.3} mm (no budget)");
     }
+    if tile.refined.is_some() {
+        return format!(
+            "{relief:.3} mm of a {budget:.3} mm budget (`facets.max_relief_mm`): the refinement holds its surface above the budget's floor"
+        );
+    }
     let a = &tile.arrangement;
     let corners = crate::stages::facets::relief::relief_mm(&a.p, &a.q, &tile.z_mm, tile.config.facet_mm);
     let held = corners >= budget - 1e-6;
@@ -199,6 +216,9 @@ fn design_method(d: &crate::stages::design::DesignConfig) -> String {
     let shape = match d.method {
         DesignMethod::FlatFacets => "flat facets",
         DesignMethod::CurvedFacets => "curved facets (each a dome over its cell of the target)",
+        DesignMethod::Refined => {
+            "curved facets, then refined as a continuous surface (its slopes transported onto the target, kept integrable and within the ball's reach)"
+        }
     };
     let loop_ = match d.correction {
         Correction::Scale => "slopes scaled per axis by the design rounds",

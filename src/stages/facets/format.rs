@@ -17,7 +17,10 @@
 //!             "sampling": {"steep_mass", "ks_random", "ks_halton", "ks_cvt", "energy_statistic",
 //!                          "energy_p_value", "mean_removed", "lloyd"},
 //!             "seams": {"max_interior_um", "max_seam_um", "rms_um"},
-//!             "anneal": {"trace", "trace_every", "proposals", "accepted", "w_v"}}
+//!             "anneal": {"trace", "trace_every", "proposals", "accepted", "w_v"}},
+//!   "refined": {"iterations", "chosen", "model_pitch_mm"}   only for a tile refined as a continuous
+//!             surface (`design.method = "refined"`): the heightfield is that surface, "facets" and
+//!             "seams" the facets it started from
 //! }
 //! ```
 
@@ -137,6 +140,10 @@ pub struct TileFile {
     pub heightfield: HeightfieldRecord,
     /// Statistics.
     pub stats: TileStats,
+    /// A tile refined as a continuous surface: how (absent for facets; the heightfield is then the surface,
+    /// the facets what it started from).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub refined: Option<super::Refinement>,
 }
 
 /// A `tile.json` (or the heightfield it names) that cannot be used.
@@ -213,6 +220,7 @@ impl TileFile {
                     w_v,
                 },
             },
+            refined: tile.refined,
         }
     }
 

@@ -314,12 +314,41 @@ pub struct Tile {
     pub anneal: AnnealReport,
     /// Steps at facet edges.
     pub seams: SeamStats,
+    /// Set when the design loop refined the tile as a continuous surface (`design.method = "refined"`):
+    /// `heightfield` is then that surface, and `arrangement`, `z_mm` and `seams` the facets it started from.
+    pub refined: Option<Refinement>,
 }
 
+/// How a tile was refined as a continuous surface (`design::refine`).
+#[derive(Clone, Copy, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Refinement {
+    /// Iterations run.
+    pub iterations: usize,
+    /// The iteration kept (1-based; the one whose as-milled model scored best).
+    pub chosen: usize,
+    /// The grid the refinement ran on, mm (the as-milled model's); the heightfield is that surface resampled
+    /// bilinearly onto the tile's own pitch.
+    pub model_pitch_mm: f64,
+}
+
+/// Samples per side of a refined tile's STL at most (a 12 mm tile at 24 µm: half a million triangles).
+pub const REFINED_STL_SIDE: usize = 512;
+
 impl Tile {
-    /// The exact faceted solid of one tile as binary STL (mm), its flat bottom 1 mm below the lowest point.
+    /// The exact faceted solid of one tile as binary STL (mm), its flat bottom 1 mm below the lowest point. A
+    /// refined tile's is its surface through at most [`REFINED_STL_SIDE`] sample centres per side.
     pub fn stl(&self) -> Vec<u8> {
         let (lo, _) = self.heightfield.range();
+        if self.refined.is_some() {
+            let hf = &self.heightfield;
+            return crate::base::stl::to_binary_stl(
+                &crate::base::stl::heightfield_solid(hf, [0.0, 0.0], REFINED_STL_SIDE, 1.0),
+                &format!(
+                    "brdfmill refined tile, mm, every {}th sample",
+                    hf.nx.max(hf.ny).div_ceil(REFINED_STL_SIDE)
+                ),
+            );
+        }
         crate::base::stl::to_binary_stl(
             &stl::tile_solid(&self.arrangement, &self.z_mm, self.config.facet_mm, lo - 1.0),
             "brdfmill tile, mm",
@@ -330,9 +359,10 @@ impl Tile {
     pub fn relief_png(&self) -> crate::base::plot::Canvas {
         let (lo, _) = self.heightfield.range();
         let c = &self.config;
+        let what = if self.refined.is_some() { "refined from" } else { "tile" };
         self.heightfield.relief_png(
             &format!(
-                "tile {}x{} facets of {} mm, relief {:.1} µm",
+                "{what} {}x{} facets of {} mm, relief {:.1} µm",
                 c.facets_x,
                 c.facets_y,
                 c.facet_mm,
@@ -529,6 +559,7 @@ pub fn run_from(cfg: &FacetsConfig, sites: &Sites) -> Result<Tile, FacetsError> 
         },
         anneal,
         seams,
+        refined: None,
     })
 }
 
@@ -595,6 +626,7 @@ fn reintegrated(tile: &Tile, arrangement: Arrangement, slopes: &[(f64, f64)]) ->
         sampling: tile.sampling,
         anneal: tile.anneal.clone(),
         seams,
+        refined: None,
     }
 }
 

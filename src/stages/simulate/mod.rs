@@ -654,58 +654,9 @@ fn sweep_tools(
     (z, rep, cuts)
 }
 
-/// The simulated surface as a closed solid for STL: the top through every `stride`-th cell centre (the stride
-/// chosen so that at most `max_side` samples lie along either side), vertical sides and a flat bottom
-/// `base_mm` below the lowest point. Coordinates in work mm.
+/// The simulated surface as a closed solid for STL ([`crate::base::stl::heightfield_solid`] in work mm).
 pub fn solid(sim: &Simulation, max_side: usize, base_mm: f64) -> Vec<crate::base::stl::Triangle> {
-    use crate::base::geometry::Vec3;
-    let hf = &sim.heightfield;
-    let f = hf.nx.max(hf.ny).div_ceil(max_side.max(2)).max(1);
-    let is: Vec<usize> = (0..hf.nx).step_by(f).chain(std::iter::once(hf.nx - 1)).collect();
-    let js: Vec<usize> = (0..hf.ny).step_by(f).chain(std::iter::once(hf.ny - 1)).collect();
-    let dedup = |mut v: Vec<usize>| {
-        v.dedup();
-        v
-    };
-    let (is, js) = (dedup(is), dedup(js));
-    let (lo, _) = hf.range();
-    let zb = lo - base_mm.abs().max(1e-3);
-    let top = |a: usize, b: usize| {
-        let [x, y] = sim.cell_xy(is[a], js[b]);
-        Vec3::new(x, y, hf.at(is[a], js[b]))
-    };
-    let bot = |a: usize, b: usize| {
-        let [x, y] = sim.cell_xy(is[a], js[b]);
-        Vec3::new(x, y, zb)
-    };
-    let (w, h) = (is.len(), js.len());
-    let mut t = Vec::with_capacity(2 * (w - 1) * (h - 1) + 4 * (w + h) + 8);
-    for b in 0..h.saturating_sub(1) {
-        for a in 0..w.saturating_sub(1) {
-            t.push([top(a, b), top(a + 1, b), top(a + 1, b + 1)]);
-            t.push([top(a, b), top(a + 1, b + 1), top(a, b + 1)]);
-        }
-    }
-    // the boundary, counter-clockwise seen from above
-    let mut ring: Vec<(usize, usize)> = vec![];
-    ring.extend((0..w).map(|a| (a, 0)));
-    ring.extend((1..h).map(|b| (w - 1, b)));
-    ring.extend((0..w - 1).rev().map(|a| (a, h - 1)));
-    ring.extend((1..h - 1).rev().map(|b| (0, b)));
-    for k in 0..ring.len() {
-        let (p, q) = (ring[k], ring[(k + 1) % ring.len()]);
-        // outward side wall: seen from outside, p→q runs left to right along the top
-        t.push([bot(p.0, p.1), bot(q.0, q.1), top(q.0, q.1)]);
-        t.push([bot(p.0, p.1), top(q.0, q.1), top(p.0, p.1)]);
-    }
-    // bottom: a fan from its centre, facing down
-    let c = ring.iter().fold(Vec3::zeros(), |s, &(a, b)| s + bot(a, b)) / ring.len() as f64;
-    for k in 0..ring.len() {
-        let (p, q) = (ring[k], ring[(k + 1) % ring.len()]);
-        t.push([c, bot(q.0, q.1), bot(p.0, p.1)]);
-    }
-    t.retain(|tri| (tri[1] - tri[0]).cross(&(tri[2] - tri[0])).norm() > 0.0);
-    t
+    crate::base::stl::heightfield_solid(&sim.heightfield, sim.origin_mm, max_side, base_mm)
 }
 
 #[cfg(test)]
