@@ -12,6 +12,38 @@ use std::time::Duration;
 // ---------------------------------------------------------------------------------------------------------
 // The tests
 
+/// The arc tolerance a program's header asks for (`controller: $12=…`, what its verdict's simulation cut the
+/// arcs with), against the firmware's own `$$`: GRBL prints settings to three decimals, so the profiles ask
+/// for 0.001 mm, which it reports exactly. At its default 0.002 mm the stream is refused before any motion
+/// (the trace stays empty); set to 0.001 mm (`$12=0.001`, stored by the kit before the port appears) the
+/// same program runs every line once.
+#[test]
+fn a_coarser_arc_tolerance_is_refused_and_the_asked_one_accepted() {
+    let _one = one_at_a_time();
+    let Some((kit, exe)) = kit_or_skip("arc tolerance") else {
+        return;
+    };
+    for (settings, runs) in [(&[][..], false), (&["$12=0.001"][..], true)] {
+        let sim = Sim::start(&kit, &exe, settings);
+        let head = [
+            "(controller: $12=0.001 mm or finer [arc tolerance, as simulated])",
+            "G21G90G94",
+            "M3S1000",
+        ];
+        let prog = zigzag(sim.dir.path(), "p.nc", &head, 10, 0.0, 1.0, 0.5, 0.0);
+        let j = sim.path("j.jsonl");
+        let r = stream(&sim, &prog, &j, &[]);
+        let v = sim.verdict(&prog, [0.0; 3], None, false);
+        if runs {
+            assert!(r.ok(), "{r:?}");
+            assert!(v.all_once(), "{v:?}");
+        } else {
+            assert!(!r.ok() && r.said().contains("$12 is 0.002 mm"), "{r:?}");
+            assert!(v.ran_once.is_empty() && v.partial.is_empty(), "nothing moved: {v:?}");
+        }
+    }
+}
+
 /// Positive control of the harness: a fresh stream of 30 lines, every motion line once by the trace, exit
 /// 0.
 #[test]

@@ -483,7 +483,7 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
     let opt = brdfmill::stages::simulate::gcode::ParseOptions {
         dialect: m.dialect,
         start_mm: [0.0, 0.0, m.program.clearance_z()],
-        arc_tolerance_mm: 2e-3,
+        arc_tolerance_mm: m.limits.arc_tolerance_mm.expect("the 3018 declares its $12"),
         ..Default::default()
     };
     let texts: Vec<&str> = texts.iter().map(String::as_str).collect();
@@ -518,7 +518,8 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
     );
     assert!(html[sheet..].contains("touch-off pad") && html[sheet..].contains("brdfmill stream program-1.nc"));
     // GRBL cuts arcs as chords of at least its `$12`: the sheet counts the programs' arcs (counted here from
-    // their text: a block with a centre offset) and names the `$12` the simulation assumed
+    // their text: a block with a centre offset) and names the `$12` the simulation assumed, the profile's,
+    // which every program's header states for `stream` to check
     let arcs = texts
         .iter()
         .flat_map(|t| t.lines())
@@ -533,10 +534,15 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         .nth(1)
         .and_then(|t| t.split("</td>").next())
         .expect("an arcs row");
+    let asked = m.limits.arc_tolerance_mm.unwrap();
     assert!(
-        row.starts_with(&format!("{arcs} arcs")) && row.contains("0.002 mm"),
+        row.starts_with(&format!("{arcs} arcs")) && row.contains(&format!("<code>$12</code> = {asked} mm")),
         "{row}"
     );
+    for t in &texts {
+        let header = format!("(controller: $12={asked} mm");
+        assert!(t.lines().take(20).any(|l| l.starts_with(&header)), "{header}");
+    }
     assert!(
         html[sheet..].contains("57296 rpm"),
         "the sheet names the speed the finishing ball would need"

@@ -41,8 +41,8 @@ impl Link for Recording {
     }
 }
 
-#[test]
-fn a_generated_grbl_program_streams_to_the_virtual_controller() {
+/// A small program for the 3018's profile, written to a temporary folder: the toolpath, the folder, the file.
+fn grbl_program() -> (toolpath::Toolpath, tempfile::TempDir, std::path::PathBuf, Machine) {
     let n = ndf::run(
         &NdfConfig {
             res: 64,
@@ -69,15 +69,24 @@ fn a_generated_grbl_program_streams_to_the_virtual_controller() {
     };
     let p = toolpath::run(&tcfg, &tile.heightfield, &machine).unwrap();
     assert!(p.gcode.lines().all(|l| l.len() < 80), "GRBL's line buffer");
-
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("p.nc");
     std::fs::write(&path, &p.gcode).unwrap();
+    (p, dir, path, machine)
+}
+
+#[test]
+fn a_generated_grbl_program_streams_to_the_virtual_controller() {
+    let (p, dir, path, machine) = grbl_program();
     let prog = Program::read(&path, true).unwrap();
     let baud = 1_000_000;
+    // the controller set as the profile asks (`$12`, which the program's header states)
+    let arc_mm = machine.limits.arc_tolerance_mm.expect("the 3018 declares its $12");
+    assert_eq!(prog.arc_tolerance_asked_mm(), Some(arc_mm));
     let emu = Emulator::start(EmulatorConfig {
         baud,
         time_scale: 1000.0,
+        settings: vec![(12, arc_mm)],
         ..EmulatorConfig::default()
     })
     .expect("pseudo-terminal");
@@ -132,4 +141,58 @@ fn a_generated_grbl_program_streams_to_the_virtual_controller() {
             "controller ends at {last:?}, program at {end:?}"
         );
     }
+}
+
+/// A controller left at GRBL's default `$12` (0.002 mm), coarser than the 0.001 mm the program's header
+/// says its verdict was simulated with: the stream is refused after `$$`, before a program line or a journal
+/// is written, and the message says how to set it; `--accept-coarser-arcs` streams it anyway.
+#[test]
+fn a_controller_with_a_coarser_arc_tolerance_is_refused_before_a_line_is_sent() {
+    let (_, dir, path, _) = grbl_program();
+    let prog = Program::read(&path, true).unwrap();
+    let baud = 1_000_000;
+    let run = |cfg: &Config, journal: &str| {
+        let emu = Emulator::start(EmulatorConfig {
+            baud,
+            time_scale: 1000.0,
+            ..EmulatorConfig::default()
+        })
+        .expect("pseudo-terminal");
+        let mut link = SerialLink::open(&emu.port_path().unwrap(), baud).unwrap();
+        let r = session::run(
+            &mut link,
+            &prog,
+            cfg,
+            &dir.path().join(journal),
+            Mode::Fresh,
+            &mut Silent,
+            &AtomicBool::new(false),
+        );
+        (r, emu.log())
+    };
+    let (refused, log) = run(&Config::default(), "refused.journal");
+    let err = refused.expect_err("a coarser $12 is refused");
+    let msg = err.to_string();
+    assert!(
+        msg.contains("$12 is 0.002 mm") && msg.contains("`$12=0.001`") && msg.contains("--accept-coarser-arcs"),
+        "{msg}"
+    );
+    let sent: Vec<String> = prog.sendable().map(|l| l.wire_text(true)).collect();
+    assert!(
+        !log.received.iter().any(|r| sent.contains(r)),
+        "no program line reached the controller: {:?}",
+        log.received
+    );
+    assert!(!dir.path().join("refused.journal").exists(), "no journal was started");
+    let accept = Config {
+        accept_coarser_arcs: true,
+        spindle_dwell_s: 0.1,
+        ..Config::default()
+    };
+    let (ran, log) = run(&accept, "accepted.journal");
+    assert!(matches!(ran, Ok(Outcome::Completed(_))), "{ran:?}");
+    assert!(
+        log.received.ends_with(&sent),
+        "accepted, every line arrived once, in order"
+    );
 }

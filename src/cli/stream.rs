@@ -56,6 +56,10 @@ pub struct Args {
     /// Do not prefix blocks with N line numbers (status reports then cannot name the executing line).
     #[arg(long)]
     pub no_line_numbers: bool,
+    /// Stream even when the controller's arc tolerance `$12` is coarser than the program's header asks (the
+    /// `$12` its verdict's simulation cut the arcs with): its arcs are then cut further from the design
+    #[arg(long)]
+    pub accept_coarser_arcs: bool,
 }
 
 struct Bar {
@@ -136,6 +140,7 @@ pub fn run(a: &Args) -> Result<()> {
         unlock: a.unlock,
         position_reestablished: a.position_reestablished,
         skip_lines: a.skip_line.clone(),
+        accept_coarser_arcs: a.accept_coarser_arcs,
         ..Config::default()
     };
     if !a.resume && (a.position_reestablished || !a.skip_line.is_empty()) {

@@ -254,7 +254,25 @@ pub fn fingerprint(bytes: &[u8]) -> u64 {
     h
 }
 
+/// How a program's header asks for GRBL's arc tolerance: the comment `(controller: $12=T mm …)` among the
+/// comment lines before its first block. The toolpath stage writes it for a GRBL profile (the `$12` its
+/// verdict's simulation cut the arcs with), and `stream` reads it to refuse a controller set coarser.
+pub const ARC_TOLERANCE_MARK: &str = "controller: $12=";
+
 impl Program {
+    /// The arc tolerance `$12` the program's header asks for, mm ([`ARC_TOLERANCE_MARK`]), if it asks.
+    pub fn arc_tolerance_asked_mm(&self) -> Option<f64> {
+        self.lines
+            .iter()
+            .take_while(|l| l.kind == LineKind::Empty)
+            .find_map(|l| {
+                let t = l.source.trim();
+                let rest = t.strip_prefix('(')?.strip_prefix(ARC_TOLERANCE_MARK)?;
+                let num: String = rest.chars().take_while(|c| c.is_ascii_digit() || *c == '.').collect();
+                num.parse::<f64>().ok().filter(|v| v.is_finite() && *v > 0.0)
+            })
+    }
+
     /// Read and annotate a program file. `numbered`: the streamer will prefix each block with
     /// `N<line>`, which counts against GRBL's line length.
     pub fn read(path: &Path, numbered: bool) -> Result<Program, ProgramError> {

@@ -202,8 +202,10 @@ fn arc_advice(ready: &Ready, sim: &SimStats) -> Option<(String, String)> {
         "arcs".into(),
         format!(
             "{arcs} arcs (G2/G3): GRBL cuts each as chords that stand at least its `$12` inside the arc (below \
-             it over a crest), and the simulated cut the verdict measured assumed {assumed}. Read `$12` with `$$` before running: set \
-             coarser, it cuts the arcs further from the design than the verdict saw; finer (0.0005), closer"
+             it over a crest), and the simulated cut the verdict measured assumed {assumed}. Set `$12` to {profile_mm} mm on the \
+             controller before running (`$12={profile_mm}`; `$$` lists it): coarser, it cuts the arcs further from the design \
+             than the verdict saw, and `brdfmill stream` refuses to start (the programs' header says what they were simulated \
+             with; `--accept-coarser-arcs` overrides)"
         ),
     ))
 }

@@ -668,6 +668,14 @@ fn header(f: &HeaderFacts) -> Vec<String> {
         "design depth {:.4} mm, simplification tolerance {} um (one-sided)",
         f.depth, cfg.tolerance_um
     ));
+    if f.machine.dialect == crate::gcode::Dialect::Grbl {
+        if let Some(t) = f.machine.limits.arc_chord_mm(f.machine.dialect) {
+            h.push(format!(
+                "{}{t} mm or finer (arc tolerance, as simulated)",
+                crate::gcode::program::ARC_TOLERANCE_MARK
+            ));
+        }
+    }
     h
 }
 

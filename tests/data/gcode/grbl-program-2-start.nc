@@ -7,6 +7,7 @@
 (rough T3 flat3: flat D3.175 mm, 4 layers of 0.317 mm, F539 plunge 179 S10000)
 (area 6 x 6 mm, origin at its lower-left corner, Z0 = stock top)
 (design depth 1.2001 mm, simplification tolerance 0.625 um [one-sided])
+(controller: $12=0.001 mm or finer [arc tolerance, as simulated])
 (estimated run time 0:18:15 [0:18:15 at the block rate], 9163 blocks)
 (program 2 of 2, run them in order: tool ball1 only. Mount it, keep X0 Y0,)
 (set Z0 on the touch-off pad [uncut stock top, see the setup sheet], then)

@@ -26,6 +26,9 @@ pub struct Config {
     pub position_reestablished: bool,
     /// On resume: lines GRBL rejected (`error:N`) that the user chose to leave out, on purpose.
     pub skip_lines: Vec<usize>,
+    /// Stream even when the controller's arc tolerance `$12` is coarser than the program's header asks
+    /// (`controller: $12=…`, the tolerance its verdict's simulation cut the arcs with).
+    pub accept_coarser_arcs: bool,
     /// Status poll period (GRBL asks for at most 5 Hz: ≥ 200 ms).
     pub status_interval: Duration,
     /// How long the handshake may take.
@@ -52,6 +55,7 @@ impl Default for Config {
             unlock: false,
             position_reestablished: false,
             skip_lines: Vec::new(),
+            accept_coarser_arcs: false,
             status_interval: Duration::from_millis(200),
             handshake_timeout: Duration::from_secs(5),
             hold_timeout: Duration::from_secs(30),

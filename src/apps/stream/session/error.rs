@@ -69,6 +69,14 @@ pub enum StreamError {
     /// Journal I/O or consistency.
     #[error(transparent)]
     Journal(#[from] JournalError),
+    /// A controller setting does not match what the program was made and simulated for.
+    #[error("{port}: {what}; nothing was sent")]
+    Setting {
+        /// The port.
+        port: String,
+        /// Which setting, its value, what the program asks and how to set it.
+        what: String,
+    },
     /// Interrupted by the user before streaming.
     #[error("interrupted before streaming started; nothing was run")]
     Interrupted,

@@ -214,6 +214,36 @@ impl Session<'_> {
         };
     }
 
+    /// The program's header asks for GRBL's arc tolerance `$12` at most `T` (the chords its verdict's
+    /// simulation cut, `Program::arc_tolerance_asked_mm`): a controller set coarser cuts every arc further
+    /// inside than the verdict saw (docs/MACHINE.md §3.1), so it is refused before a line is sent, unless
+    /// accepted (`Config::accept_coarser_arcs`, then noted). A controller whose `$$` did not give `$12` is
+    /// refused alike: nothing says what it will cut.
+    pub(super) fn require_arc_tolerance(&mut self) -> Result<(), StreamError> {
+        let Some(want) = self.program.arc_tolerance_asked_mm() else {
+            return Ok(());
+        };
+        let have = self.settings.get(&12).copied();
+        if have.is_some_and(|h| h <= want * (1.0 + 1e-9)) {
+            return Ok(());
+        }
+        let what = format!(
+            "the program was simulated with GRBL's arc tolerance $12 = {want} mm, and the controller's {}: its chords would stand further inside every arc than the verdict saw. Send `$12={want}` (a setting GRBL keeps across restarts), or stream with --accept-coarser-arcs",
+            match have {
+                Some(h) => format!("$12 is {h} mm"),
+                None => "$12 could not be read ($$)".to_string(),
+            }
+        );
+        if self.cfg.accept_coarser_arcs {
+            self.observer.note(&format!("accepted: {what}"));
+            return Ok(());
+        }
+        Err(StreamError::Setting {
+            port: self.port(),
+            what,
+        })
+    }
+
     /// `$$`, sent alone: every `$n=value` line up to its `ok`.
     fn settings_listing(&mut self) -> Result<BTreeMap<u16, f64>, String> {
         self.write(b"$$\n").map_err(|f| format!("{f:?}"))?;

@@ -287,6 +287,7 @@ impl Session<'_> {
     fn prepare_fresh(&mut self, info: &Info) -> Result<Option<[f64; 3]>, StreamError> {
         self.require_idle(info, false)?;
         self.read_settings(info);
+        self.require_arc_tolerance()?;
         if self.cfg.check_first {
             self.check_run()?;
         }

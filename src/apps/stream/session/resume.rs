@@ -65,6 +65,7 @@ impl Session<'_> {
         })?;
         st.skipped.extend(&skips);
         self.read_settings(info);
+        self.require_arc_tolerance()?;
         let mut j = Journal::append(journal_path)?;
         let located = matches!(st.stop, Some(Record::Stop { located: true, .. }));
         if !located {
