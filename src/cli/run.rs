@@ -57,15 +57,15 @@ pub fn run(a: &Args) -> Result<i32> {
                 .highlight_corr
                 .map(|c| format!(", highlight {c:.4}"))
                 .unwrap_or_default();
+            let steps = if round.refined {
+                "refined surface".to_string()
+            } else {
+                format!("steps {:.1} µm rms", round.rms_step_um)
+            };
             let line = format!(
-                    "   {what}  as-milled model: corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}]{highlight}, relief {:.3} mm, steps {:.1} µm rms",
-                    round.ndf_corr,
-                    round.ndf_l1,
-                    round.cov_ratio[0],
-                    round.cov_ratio[1],
-                    round.relief_mm,
-                    round.rms_step_um
-                );
+                "   {what}  as-milled model: corr {:.4}, L1 {:.4}, variance ratio [{:.3}, {:.3}]{highlight}, relief {:.3} mm, {steps}",
+                round.ndf_corr, round.ndf_l1, round.cov_ratio[0], round.cov_ratio[1], round.relief_mm
+            );
             match &bar {
                 Some(b) => b.suspend(|| println!("{line}")),
                 None => println!("{line}"),

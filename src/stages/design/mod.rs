@@ -177,6 +177,10 @@ pub struct Round {
     /// With a drawn highlight target: the correlation of the model's highlight with the image.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub highlight_corr: Option<f64>,
+    /// An iteration of the refinement (`design.method = "refined"`): the figures are those of a continuous
+    /// surface, not of facets (no steps; `scale` is the facets' round it started from).
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub refined: bool,
 }
 
 /// What the loop needs besides the facets configuration.
@@ -409,7 +413,9 @@ fn evaluate_surface(
 ) -> (Round, SlopeGrid) {
     let design = with_base(surface_ndf(surface, input.ndf.config.domain()).0, input.base);
     let (lo, hi) = surface.range();
-    figures(round, surface, &design, input, cone_tan, scale, [hi - lo, 0.0, 0.0], 0)
+    let (mut r, model) = figures(round, surface, &design, input, cone_tan, scale, [hi - lo, 0.0, 0.0], 0);
+    r.refined = true;
+    (r, model)
 }
 
 /// A surface's NDF by central differences, each sample alike, and the fraction of its slopes beyond the grid.
@@ -513,6 +519,7 @@ fn figures(
         scale,
         score,
         highlight_corr,
+        refined: false,
     };
     (r, milled)
 }

@@ -520,8 +520,23 @@ fn convergence(
         .iter()
         .map(|r| {
             format!(
-                "round {}: slopes ×[{:.3}, {:.3}], model corr {:.4}, L1 {:.3}, variance [{:.3}, {:.3}], relief {:.3} mm, steps {:.1} µm rms",
-                r.round, r.scale[0], r.scale[1], r.ndf_corr, r.ndf_l1, r.cov_ratio[0], r.cov_ratio[1], r.relief_mm, r.rms_step_um
+                "round {}: {}, model corr {:.4}, L1 {:.3}, variance [{:.3}, {:.3}], relief {:.3} mm{}",
+                r.round,
+                if r.refined {
+                    "refined surface".to_string()
+                } else {
+                    format!("slopes ×[{:.3}, {:.3}]", r.scale[0], r.scale[1])
+                },
+                r.ndf_corr,
+                r.ndf_l1,
+                r.cov_ratio[0],
+                r.cov_ratio[1],
+                r.relief_mm,
+                if r.refined {
+                    String::new()
+                } else {
+                    format!(", steps {:.1} µm rms", r.rms_step_um)
+                }
             )
         })
         .collect();
@@ -538,10 +553,18 @@ fn convergence(
     } else {
         String::new()
     };
+    let refined = rounds.iter().filter(|r| r.refined).count();
+    let refined = if refined > 0 {
+        format!(
+            " The last {refined} rounds are the refinement's iterations (`design.method = \"refined\"`): the tile as a continuous surface, its slopes transported onto the target and projected back onto integrable surfaces the ball reaches (docs/DESIGN.md §3.5)."
+        )
+    } else {
+        String::new()
+    };
     Figure::new(
         "Design rounds",
         format!(
-            "Each round models what the ball leaves of the tile (its opening of the periodic tile, convolved with the scallop lobe) and scales the facet slopes so the model's variance meets the target's.{candidates} The short dashed marks are the simulated G-code of the chosen round (round {chosen}), the grey dashed lines the tolerance band. {}.",
+            "Each round models what the ball leaves of the tile (its opening of the periodic tile, convolved with the scallop lobe) and scales the facet slopes so the model's variance meets the target's.{candidates}{refined} The short dashed marks are the simulated G-code of the chosen round (round {chosen}), the grey dashed lines the tolerance band. {}.",
             rows.join("; ")
         ),
         &plot.render(),
