@@ -241,8 +241,13 @@ fn verify_single(
         rounds: &outcome.rounds.0,
         arrangements: &outcome.arrangements,
     };
-    let mut v = verify::run(&job.verify, &input).map_err(stage_err("verify"))?;
-    v.metrics.machine_effects = machine_effects(ready, &program.texts(), &input, &v.design)?;
+    // each machine error's cut is independent of the verdict's measurement: both at once keep both cores busy
+    let (v, effects) = rayon::join(
+        || verify::run(&job.verify, &input).map_err(stage_err("verify")),
+        || machine_effects(ready, &program.texts(), &input),
+    );
+    let mut v = v?;
+    v.metrics.machine_effects = effects?;
     v.metrics.notes.extend(ready.toolpath.notes.iter().cloned());
     o.write("wave.png", &v.wave_png.to_png())?;
     // the grids the verdict measured, so that any of its figures can be recomputed from data
@@ -295,7 +300,6 @@ fn machine_effects(
     ready: &Ready,
     programs: &[&str],
     input: &VerifyInput,
-    design: &crate::base::slope::SlopeGrid,
 ) -> Result<Vec<verify::MachineEffect>, JobError> {
     let each = ready.toolpath.machine.accuracy().each();
     if each.len() < 2 {
@@ -320,7 +324,7 @@ fn machine_effects(
             base_is_scallop: false,
             ..*input
         };
-        let m = verify::measure_cut(&ready.job.verify, &cut, design).map_err(stage_err("verify"))?;
+        let m = verify::measure_shape(&ready.job.verify, &cut).map_err(stage_err("verify"))?;
         out.push(verify::MachineEffect {
             error: name.into(),
             what: if alone {

@@ -92,19 +92,26 @@ pub(super) fn program_and_cut(
     }
     o.start(progress, Stage::Simulate);
     let shape = ready.toolpath.cutting_shape();
-    let (sim, dev, figures) = simulate_stage(ready, shape, &program, design, design_file, o)?;
-    let sim_ideal = match sim.stats.accuracy {
-        Some(_) => {
-            // measured by its surface only (`milled_ideal`), so swept deepest first
-            let cfg = crate::stages::simulate::SimulateConfig {
-                ideal: true,
-                surface_only: true,
-                ..ready.job.simulate.config(&ready.toolpath)
-            };
-            Some(simulate::run_files(&program.texts(), &cfg).map_err(stage_err("simulate"))?)
-        }
-        None => None,
-    };
+    let declared = ready.job.simulate.config(&ready.toolpath);
+    // the cut on a perfect machine as well when the machine declares errors (`milled_ideal`), measured by
+    // its surface only, so swept deepest first; independent of the declared cut, so both at once
+    let ideal_cfg = (!declared.accuracy().is_perfect()).then_some(crate::stages::simulate::SimulateConfig {
+        ideal: true,
+        surface_only: true,
+        ..declared
+    });
+    let texts = program.texts();
+    let (declared_cut, sim_ideal) = rayon::join(
+        || simulate_stage(ready, shape, &program, design, design_file, o),
+        || {
+            ideal_cfg
+                .as_ref()
+                .map(|cfg| simulate::run_files(&texts, cfg).map_err(stage_err("simulate")))
+                .transpose()
+        },
+    );
+    let (sim, dev, figures) = declared_cut?;
+    let sim_ideal = sim_ideal?;
     // the air the simulation found, beside the program's numbers
     program.summary.air_feed_mm = Some(sim.stats.air_feed_mm);
     program.summary.air_feed_s = Some(sim.stats.air_feed_s);

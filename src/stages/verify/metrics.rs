@@ -180,6 +180,37 @@ pub struct SurfaceMetrics {
     pub pass: bool,
 }
 
+/// The three figures of a distribution's shape against a reference: relative L1, correlation, and the
+/// slope variance ratios per axis (within the machinable cone when `cone_tan` is finite, as the verdict
+/// measures them). [`measure`] computes these and the rest; what only compares shapes (each machine
+/// error's cut) needs no more.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Shape {
+    /// Relative L1 distance.
+    pub ndf_l1: f64,
+    /// Correlation.
+    pub ndf_corr: f64,
+    /// Variance ratio along x and y.
+    pub cov_ratio: [f64; 2],
+}
+
+/// See [`Shape`].
+pub fn shape(reference: &SlopeGrid, candidate: &SlopeGrid, cone_tan: f64) -> Shape {
+    let (sr, sc) = if cone_tan.is_finite() {
+        (
+            reference.within_cone(cone_tan).stats(),
+            candidate.within_cone(cone_tan).stats(),
+        )
+    } else {
+        (reference.stats(), candidate.stats())
+    };
+    Shape {
+        ndf_l1: candidate.relative_l1(reference),
+        ndf_corr: correlation(&candidate.density, &reference.density),
+        cov_ratio: [sc.cov[0][0] / sr.cov[0][0], sc.cov[1][1] / sr.cov[1][1]],
+    }
+}
+
 /// Slope of a density's peak.
 pub fn peak(g: &SlopeGrid) -> (f64, f64) {
     let k = g
@@ -222,18 +253,12 @@ pub fn measure(
     tol: &Tolerances,
     cone_tan: f64,
 ) -> SurfaceMetrics {
-    let ndf_l1 = candidate.relative_l1(reference);
-    let ndf_corr = correlation(&candidate.density, &reference.density);
+    let Shape {
+        ndf_l1,
+        ndf_corr,
+        cov_ratio,
+    } = shape(reference, candidate, cone_tan);
     let ndf_js = jensen_shannon(&candidate.density, &reference.density);
-    let (sr, sc) = if cone_tan.is_finite() {
-        (
-            reference.within_cone(cone_tan).stats(),
-            candidate.within_cone(cone_tan).stats(),
-        )
-    } else {
-        (reference.stats(), candidate.stats())
-    };
-    let cov_ratio = [sc.cov[0][0] / sr.cov[0][0], sc.cov[1][1] / sr.cov[1][1]];
     let (pr, pc) = (peak(reference), peak(candidate));
     let (na, nb) = (slope_to_normal(pr.0, pr.1), slope_to_normal(pc.0, pc.1));
     let peak_offset_deg = na.cross(&nb).norm().atan2(na.dot(&nb)).to_degrees();

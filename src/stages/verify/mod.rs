@@ -22,7 +22,7 @@ mod run;
 
 pub use metrics::{SurfaceMetrics, Tolerances};
 pub use regions::{RegionMetrics, RegionsMetrics};
-pub use run::{measure_cut, run, VerifyConfig, VerifyError, VerifyInput, VerifyOutput};
+pub use run::{measure_cut, measure_shape, run, VerifyConfig, VerifyError, VerifyInput, VerifyOutput};
 
 use serde::{Deserialize, Serialize};
 

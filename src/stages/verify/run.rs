@@ -330,6 +330,18 @@ pub fn measure_cut(cfg: &VerifyConfig, input: &VerifyInput, design: &SlopeGrid) 
     Ok(m)
 }
 
+/// The shape of a cut's milled NDF against the target (L1, correlation, variance ratios: the figures
+/// [`measure_cut`] gives, without the albedo integrals and checks it adds), for the cuts that only show
+/// what each machine error moves.
+pub fn measure_shape(cfg: &VerifyConfig, input: &VerifyInput) -> Result<metrics::Shape, VerifyError> {
+    let (milled, _, _) = milled_ndf(cfg, input)?;
+    Ok(metrics::shape(
+        &input.ndf.observed,
+        &milled,
+        input.cone_deg.to_radians().tan(),
+    ))
+}
+
 /// What the machine's errors did to the milled figures (none when it declares none).
 fn machine_note(sim: &Simulation, milled: &SurfaceMetrics, ideal: &SurfaceMetrics) -> Option<String> {
     let acc = sim.stats.accuracy?;
