@@ -306,6 +306,24 @@ fn machine_effects(
         return Ok(vec![]);
     }
     let base = ready.job.simulate.config(&ready.toolpath);
+    // the scallop lobe of the bit without runout, the same for every cut here that has none (each lobe
+    // is an integral over the slope grid, worth computing once)
+    let bit = ready.toolpath.tool.shape;
+    let bit_lobe = if each.iter().any(|(_, acc, _)| acc.envelope(bit) == bit) {
+        Some(
+            crate::stages::ndf::Kernel::scallop(
+                &input.ndf.config.domain(),
+                &bit,
+                input.stepover_mm,
+                input.raster_angle_deg,
+                input.polish,
+                input.ndf_config,
+            )
+            .map_err(stage_err("verify"))?,
+        )
+    } else {
+        None
+    };
     let mut out = vec![];
     for (name, acc, alone) in each {
         let mut machine = ready.toolpath.machine.clone();
@@ -318,10 +336,13 @@ fn machine_effects(
         };
         let sim = crate::stages::simulate::run_files(programs, &cfg).map_err(stage_err("simulate"))?;
         // measured with this cut's own scallop lobe (the runout's flat only when the runout is in the cut)
+        let tool = acc.envelope(bit);
+        let shared = bit_lobe.as_ref().filter(|_| tool == bit);
         let cut = VerifyInput {
             sim: &sim,
-            tool: acc.envelope(ready.toolpath.tool.shape),
-            base_is_scallop: false,
+            tool,
+            base: shared.or(input.base),
+            base_is_scallop: shared.is_some(),
             ..*input
         };
         let m = verify::measure_shape(&ready.job.verify, &cut).map_err(stage_err("verify"))?;
