@@ -180,12 +180,12 @@ pub struct SurfaceMetrics {
     pub pass: bool,
 }
 
-/// The three figures of a distribution's shape against a reference: relative L1, correlation, and the
+/// The three figures of a distribution's shape against a reference (not a tool's shape, `cut::tool::Shape`): relative L1, correlation, and the
 /// slope variance ratios per axis (within the machinable cone when `cone_tan` is finite, as the verdict
 /// measures them). [`measure`] computes these and the rest; what only compares shapes (each machine
 /// error's cut) needs no more.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct Shape {
+pub struct NdfShape {
     /// Relative L1 distance.
     pub ndf_l1: f64,
     /// Correlation.
@@ -194,8 +194,8 @@ pub struct Shape {
     pub cov_ratio: [f64; 2],
 }
 
-/// See [`Shape`].
-pub fn shape(reference: &SlopeGrid, candidate: &SlopeGrid, cone_tan: f64) -> Shape {
+/// See [`NdfShape`].
+pub fn ndf_shape(reference: &SlopeGrid, candidate: &SlopeGrid, cone_tan: f64) -> NdfShape {
     let (sr, sc) = if cone_tan.is_finite() {
         (
             reference.within_cone(cone_tan).stats(),
@@ -204,7 +204,7 @@ pub fn shape(reference: &SlopeGrid, candidate: &SlopeGrid, cone_tan: f64) -> Sha
     } else {
         (reference.stats(), candidate.stats())
     };
-    Shape {
+    NdfShape {
         ndf_l1: candidate.relative_l1(reference),
         ndf_corr: correlation(&candidate.density, &reference.density),
         cov_ratio: [sc.cov[0][0] / sr.cov[0][0], sc.cov[1][1] / sr.cov[1][1]],
@@ -253,11 +253,11 @@ pub fn measure(
     tol: &Tolerances,
     cone_tan: f64,
 ) -> SurfaceMetrics {
-    let Shape {
+    let NdfShape {
         ndf_l1,
         ndf_corr,
         cov_ratio,
-    } = shape(reference, candidate, cone_tan);
+    } = ndf_shape(reference, candidate, cone_tan);
     let ndf_js = jensen_shannon(&candidate.density, &reference.density);
     let (pr, pc) = (peak(reference), peak(candidate));
     let (na, nb) = (slope_to_normal(pr.0, pr.1), slope_to_normal(pc.0, pc.1));

@@ -333,9 +333,9 @@ pub fn measure_cut(cfg: &VerifyConfig, input: &VerifyInput, design: &SlopeGrid) 
 /// The shape of a cut's milled NDF against the target (L1, correlation, variance ratios: the figures
 /// [`measure_cut`] gives, without the albedo integrals and checks it adds), for the cuts that only show
 /// what each machine error moves.
-pub fn measure_shape(cfg: &VerifyConfig, input: &VerifyInput) -> Result<metrics::Shape, VerifyError> {
+pub fn measure_shape(cfg: &VerifyConfig, input: &VerifyInput) -> Result<metrics::NdfShape, VerifyError> {
     let (milled, _, _) = milled_ndf(cfg, input)?;
-    Ok(metrics::shape(
+    Ok(metrics::ndf_shape(
         &input.ndf.observed,
         &milled,
         input.cone_deg.to_radians().tan(),
