@@ -10,7 +10,7 @@ fn brdfmill() -> Command {
 fn analyzes_the_real_scan() {
     let dir = tempfile::tempdir().unwrap();
     let out = brdfmill()
-        .args(["analyze", "tests/data/x3p/sample-land.x3p", "--windows", "2", "--out"])
+        .args(["analyze", "examples/data/sample-land.x3p", "--windows", "2", "--out"])
         .arg(dir.path())
         .output()
         .unwrap();

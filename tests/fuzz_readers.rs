@@ -141,7 +141,7 @@ fn mutated_files_are_read_or_refused_never_a_panic() {
     campaign("merl", &merl, &d.join("m.binary"), n, &spec("merl"));
     campaign(
         "x3p",
-        &data("tests/data/x3p/sample-land.x3p"),
+        &data("examples/data/sample-land.x3p"),
         &d.join("m.x3p"),
         n,
         &|p: &Path| brdfmill::base::x3p::read(p).map(|_| ()).map_err(|e| e.to_string()),

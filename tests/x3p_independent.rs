@@ -7,7 +7,7 @@
 //!   file) of an analytic surface, which the test evaluates in closed form;
 //! * a file written by hand from the standard's layout with Python's zipfile/hashlib/xml only: int16 (`I`)
 //!   with an Increment and an Offset, `z = Offset + Increment · v`;
-//! * the real scan `tests/data/x3p/sample-land.x3p` as x3pio reads it (every 97th point).
+//! * the real scan `examples/data/sample-land.x3p` as x3pio reads it (every 97th point).
 //!
 //! **Increment of floating-point Z data.** The schema documents `Increment` as "needed for incremental axis
 //! and integer data types: Increment is the multiplyer of the integer coordinate for the computation of the
@@ -111,7 +111,7 @@ fn hand_written_int16_file_with_an_offset_reads_as_written() {
 
 #[test]
 fn the_real_scan_reads_as_x3pio_reads_it() {
-    let s = x3p::read(&PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/x3p/sample-land.x3p")).unwrap();
+    let s = x3p::read(&PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("examples/data/sample-land.x3p")).unwrap();
     let csv = std::fs::read_to_string(
         PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/peers/x3p/sample-land-x3pio.csv"),
     )

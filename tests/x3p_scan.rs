@@ -5,7 +5,7 @@ use brdfmill::base::heightfield::Heightfield;
 use std::path::Path;
 
 fn scan() -> brdfmill::base::x3p::X3p {
-    brdfmill::base::x3p::read(Path::new("tests/data/x3p/sample-land.x3p")).expect("the scan reads")
+    brdfmill::base::x3p::read(Path::new("examples/data/sample-land.x3p")).expect("the scan reads")
 }
 
 #[test]

@@ -12,6 +12,7 @@ use crate::base::geometry::Vec3;
 use crate::base::heightfield::Heightfield;
 use crate::base::plot::escape_markup as esc;
 use crate::base::plot::{Canvas, Heatmap, Scale};
+use crate::base::scan::{Scan, ScanError};
 use crate::base::slope::SlopeDomain;
 use crate::base::surface::ndf_of_slopes;
 use crate::stages::optics::figures::wave_vs_geometric_png;
@@ -48,12 +49,9 @@ impl Default for Config {
 /// The analysis failed.
 #[derive(Debug, thiserror::Error)]
 pub enum AnalyzeError {
-    /// The X3P file could not be read.
+    /// The surface could not be read (the error names the file).
     #[error(transparent)]
-    X3p(#[from] crate::base::x3p::X3pError),
-    /// The `.npy` file could not be read (the error names it).
-    #[error(transparent)]
-    Npy(#[from] crate::base::npy::NpyError),
+    Scan(#[from] crate::base::scan::ScanError),
     /// The input is unusable (named file, reason).
     #[error("{path}: {message}")]
     Input {
@@ -109,91 +107,6 @@ pub struct Analysis {
     pub fft_vs_gabor_l2: f64,
     /// Notes on what was done to the data.
     pub notes: Vec<String>,
-}
-
-#[allow(clippy::needless_range_loop)] // Gauss–Jordan on a 3×4 matrix reads best with indices
-fn remove_plane(z: &mut [f64], valid: &[bool], nx: usize, pitch_mm: f64) -> [f64; 2] {
-    // least squares z = a + b x + c y over valid points
-    let mut s = [[0.0f64; 4]; 3];
-    for (k, v) in z.iter().enumerate() {
-        if !valid[k] {
-            continue;
-        }
-        let (x, y) = ((k % nx) as f64 * pitch_mm, (k / nx) as f64 * pitch_mm);
-        let r = [1.0, x, y];
-        for i in 0..3 {
-            for j in 0..3 {
-                s[i][j] += r[i] * r[j];
-            }
-            s[i][3] += r[i] * v;
-        }
-    }
-    // Gaussian elimination on the 3×3 normal equations
-    for c in 0..3 {
-        let p = s[c][c];
-        if p.abs() < 1e-300 {
-            return [0.0, 0.0];
-        }
-        for r in 0..3 {
-            if r != c {
-                let f = s[r][c] / p;
-                for k in 0..4 {
-                    s[r][k] -= f * s[c][k];
-                }
-            }
-        }
-    }
-    let (a, b, c) = (s[0][3] / s[0][0], s[1][3] / s[1][1], s[2][3] / s[2][2]);
-    for (k, v) in z.iter_mut().enumerate() {
-        let (x, y) = ((k % nx) as f64 * pitch_mm, (k / nx) as f64 * pitch_mm);
-        *v -= a + b * x + c * y;
-    }
-    [b, c]
-}
-
-/// The surface, its validity mask, the number of missing points and the reader's warnings.
-type Loaded = (Heightfield, Vec<bool>, usize, Vec<String>);
-
-fn load(path: &Path, cfg: &Config) -> Result<Loaded, AnalyzeError> {
-    let input = |message: String| AnalyzeError::Input {
-        path: path.to_path_buf(),
-        message,
-    };
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    match ext.as_str() {
-        "x3p" => {
-            let s = crate::base::x3p::read(path)?;
-            let missing = s.invalid_count();
-            let hf = s.heightfield().map_err(|e| input(e.to_string()))?;
-            Ok((hf, s.valid, missing, s.warnings))
-        }
-        "npy" => {
-            let pitch = cfg
-                .pitch_um
-                .ok_or_else(|| input("a .npy heightfield needs --pitch-um".into()))?;
-            // from an atomic-force scan's nanometres to a coarse profilometer's tenth of a metre
-            if !(1e-3..=1e5).contains(&pitch) {
-                return Err(input(format!(
-                    "--pitch-um must be in [0.001, 100000] µm, got {pitch:e}"
-                )));
-            }
-            let (ny, nx, z) = crate::base::npy::read_f64_2d(path)?;
-            let valid: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
-            let missing = valid.iter().filter(|v| !**v).count();
-            let x = crate::base::x3p::X3p::from_grid(nx, ny, pitch * 1e-3, z, valid.clone());
-            Ok((
-                x.heightfield().map_err(|e| input(e.to_string()))?,
-                valid,
-                missing,
-                Vec::new(),
-            ))
-        }
-        _ => Err(input("expected a .x3p or .npy file".into())),
-    }
 }
 
 fn png_uri(c: &Canvas) -> String {
@@ -258,34 +171,28 @@ fn resolution_warnings(hf: &Heightfield, cfg: &Config) -> Vec<String> {
 
 /// Run the analysis of `input` and write every artifact into `out`.
 pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeError> {
-    let (mut hf, valid, missing, mut warnings) = load(input, cfg)?;
     let bad = |message: String| AnalyzeError::Input {
         path: input.to_path_buf(),
         message,
     };
-    // one central difference needs three points per axis; anything larger analyses
-    if hf.nx < 3 || hf.ny < 3 {
-        return Err(bad(format!(
-            "{}×{} points: a slope needs at least 3×3 points",
-            hf.nx, hf.ny
-        )));
+    let npy = input.extension().is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    if npy && cfg.pitch_um.is_none() {
+        return Err(bad("a .npy heightfield needs --pitch-um".into()));
     }
-    warnings.extend(resolution_warnings(&hf, cfg));
-    let tilt = remove_plane(&mut hf.z_mm, &valid, hf.nx, hf.pitch_mm);
-    let n_valid = valid.iter().filter(|v| **v).count().max(1);
-    let rms = (hf
-        .z_mm
-        .iter()
-        .zip(&valid)
-        .filter(|(_, v)| **v)
-        .map(|(z, _)| z * z)
-        .sum::<f64>()
-        / n_valid as f64)
-        .sqrt()
-        * 1e3;
+    let mut scan = Scan::read(input, cfg.pitch_um).map_err(|e| match e {
+        ScanError::Input { path, message } => AnalyzeError::Input {
+            path,
+            message: message.replace("the pitch must be", "--pitch-um must be"),
+        },
+        e => e.into(),
+    })?;
+    let mut warnings = std::mem::take(&mut scan.warnings);
+    warnings.extend(resolution_warnings(&scan.hf, cfg));
+    let tilt = scan.level();
+    let rms = scan.rms_height_um();
+    let (hf, missing) = (&scan.hf, scan.missing);
     // slopes, skipping differences that touch a missing point
-    let masked = crate::base::x3p::X3p::from_grid(hf.nx, hf.ny, hf.pitch_mm, hf.z_mm.clone(), valid.clone());
-    let slopes = masked.masked_slopes(1);
+    let slopes = scan.slopes(0.0);
     if slopes.is_empty() {
         return Err(bad("no slope could be formed from valid points".into()));
     }
@@ -326,7 +233,7 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
         windows: cfg.windows,
         ..Default::default()
     };
-    let surf = OpticalSurface::new(&hf)?;
+    let surf = OpticalSurface::new(hf)?;
     let wi = Vec3::new(0.0, 0.0, 1.0);
     let slice = wave::fft_slice(&surf, &wi, &wcfg)?;
     let (p, wx, wy) = wave::slope_marginals(&slice);
@@ -359,7 +266,7 @@ pub fn run(cfg: &Config, input: &Path, out: &Path) -> Result<Analysis, AnalyzeEr
     let slices_png = wave_vs_geometric_png(&slice, &geo, &wi, max_slope);
     let surface_png = hf.relief_png("surface (mean plane removed, missing points filled)", 900);
 
-    let notes = notes(&warnings, tilt, missing, &hf, &wcfg, slice.windows);
+    let notes = notes(&warnings, tilt, missing, hf, &wcfg, slice.windows);
     let analysis = Analysis {
         version: 1,
         source: input.display().to_string(),

@@ -55,9 +55,30 @@ pub struct TargetSection {
     /// The angle of reflection at the ends of the highlight image's longer axis, degrees.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub highlight_extent_deg: Option<f64>,
-    /// The part's material with a `highlight` (a preset name, as in a BRDF spec's `material=`).
+    /// The part's material with a `highlight` or a `surface` (a preset name, as in a BRDF spec's
+    /// `material=`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub material: Option<String>,
+    /// A measured surface (an X3P scan, or a `.npy` heightfield in mm with `surface_pitch_um`; relative to
+    /// the job file) whose NDF is the target ([`crate::stages::brdf::surface`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface: Option<String>,
+    /// The sample pitch of a `.npy` `surface`, µm.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_pitch_um: Option<f64>,
+    /// σ of the Gaussian pre-filter of the `surface` before its slopes are taken, µm (default 0: none).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_filter_um: Option<f64>,
+    /// How the `surface`'s NDF is estimated: `"geometric"` (its slopes' histogram, the default) or `"wave"`
+    /// (the Kirchhoff BRDF at normal incidence, with `surface_wavelength_um` and `surface_sigma_um`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_method: Option<crate::stages::brdf::surface::Method>,
+    /// The wavelength of the `"wave"` estimate, µm (default 0.55).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_wavelength_um: Option<f64>,
+    /// The coherence σ of the `"wave"` estimate, µm (default 10, the seed's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub surface_sigma_um: Option<f64>,
     /// `"scallop"`, `"none"` or a BRDF spec.
     #[serde(default = "default_base")]
     pub base: String,
@@ -82,6 +103,12 @@ impl Default for TargetSection {
             highlight: None,
             highlight_extent_deg: None,
             material: None,
+            surface: None,
+            surface_pitch_um: None,
+            surface_filter_um: None,
+            surface_method: None,
+            surface_wavelength_um: None,
+            surface_sigma_um: None,
             base: default_base(),
             polish: None,
             merl_from: None,
@@ -240,7 +267,7 @@ pub enum StageError {
     /// The verification.
     #[error(transparent)]
     Verify(#[from] crate::stages::verify::VerifyError),
-    /// An input the run prepares (a MERL file written from `target.merl_from`).
+    /// An input the run prepares (a MERL file written from `target.merl_from`, a scan's figures).
     #[error("{0}")]
     Input(String),
     /// An artifact that could not be serialised.
@@ -620,7 +647,7 @@ fn apply_override(raw: &mut toml::Value, o: &str) -> Result<(), String> {
 
 /// Paths in `merl:`, `rgl:` and `csv:` specs are relative to the job file.
 pub(crate) fn resolve_spec(spec: &str, dir: &Path) -> String {
-    for kind in ["merl:", "rgl:", "csv:", "highlight:"] {
+    for kind in ["merl:", "rgl:", "csv:", "highlight:", "surface:"] {
         if let Some(rest) = spec.strip_prefix(kind) {
             let (path, tail) = rest
                 .split_once(',')
@@ -637,6 +664,7 @@ pub(crate) fn resolve_spec(spec: &str, dir: &Path) -> String {
 mod artifacts;
 mod outcome;
 mod runner;
+mod scan_target;
 mod setup;
 mod stages;
 mod summary;

@@ -264,6 +264,11 @@ fn verify_single(
     let metrics_json = serde_json::to_string_pretty(&v.metrics).map_err(stage_err("verify"))?;
     o.write("metrics.json", metrics_json.as_bytes())?;
     let mut figures = v.figures;
+    if let Some(scan) = super::scan_target::figures(&job.target, &target.target, &sim.heightfield)
+        .map_err(|e| stage_err("verify")(super::StageError::Input(e)))?
+    {
+        figures.extend(scan);
+    }
     figures.extend(designed.figures);
     figures.extend(sim_figures);
     outcome.setup = super::setup::sheet(

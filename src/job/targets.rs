@@ -74,6 +74,10 @@ impl MerlFrom {
 /// The job's single target, and the MERL file the run must write first when `target.merl_from` asks for one
 /// that does not exist (the target is then the model it is written from until the run has read the file).
 pub(super) fn single_target(t: &TargetSection, dir: &Path) -> Result<(RegionTarget, Option<MerlFrom>), String> {
+    if let Some(scan) = &t.surface {
+        return super::scan_target::single(t, scan, dir).map(|target| (target, None));
+    }
+    super::scan_target::no_surface_keys(t)?;
     let (key, spec) = target_spec(
         "target",
         (&t.brdf, &t.highlight, t.highlight_extent_deg, &t.material),
@@ -128,7 +132,7 @@ fn target_spec(
     match (highlight, brdf.trim().is_empty()) {
         (Some(_), false) => Err(format!("give `{section}.brdf` or `{section}.highlight`, not both")),
         (None, true) => Err(format!(
-            "missing `{section}.brdf` (a BRDF spec) or `{section}.highlight` (a PNG)"
+            "missing `{section}.brdf` (a BRDF spec), `{section}.highlight` (a PNG) or `{section}.surface` (a scan)"
         )),
         (None, false) => {
             for (key, given) in [
@@ -154,9 +158,14 @@ fn target_spec(
 /// `[[svbrdf.region]]` → each region's target, with names and colours checked (valid, distinct). With
 /// regions, `[target]` gives no target of its own (only `base` and `polish`).
 pub(super) fn region_targets(t: &TargetSection, sv: &SvbrdfSection, dir: &Path) -> Result<Vec<RegionTarget>, String> {
-    if !t.brdf.trim().is_empty() || t.highlight.is_some() || t.material.is_some() || t.highlight_extent_deg.is_some() {
+    if !t.brdf.trim().is_empty()
+        || t.highlight.is_some()
+        || t.surface.is_some()
+        || t.material.is_some()
+        || t.highlight_extent_deg.is_some()
+    {
         return Err(
-            "with `[svbrdf]` each `[[svbrdf.region]]` names its own target: leave `target.brdf`, `target.highlight` and their keys out (`[target]` keeps `base` and `polish`)".into(),
+            "with `[svbrdf]` each `[[svbrdf.region]]` names its own target: leave `target.brdf`, `target.highlight`, `target.surface` and their keys out (`[target]` keeps `base` and `polish`)".into(),
         );
     }
     if t.merl_from.is_some() {
@@ -272,7 +281,7 @@ fn describe_spec(spec: &str) -> String {
     let kind = kind.trim().to_ascii_lowercase();
     let mut tokens: Vec<&str> = rest.split(',').map(str::trim).collect();
     let file = match kind.as_str() {
-        "merl" | "rgl" | "csv" | "highlight" => file_name(tokens.remove(0)),
+        "merl" | "rgl" | "csv" | "highlight" | "surface" => file_name(tokens.remove(0)),
         _ => String::new(),
     };
     let params: Vec<(String, &str)> = tokens
@@ -298,6 +307,7 @@ fn describe_spec(spec: &str) -> String {
         "rgl" => format!("RGL {file}"),
         "csv" => format!("tabulated NDF {file}"),
         "highlight" => format!("drawn highlight {file}"),
+        "surface" => format!("measured surface {file}"),
         _ => return spec.trim().to_string(),
     };
     match (get("material"), get("eta"), get("k")) {

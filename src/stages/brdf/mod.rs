@@ -21,6 +21,7 @@ pub mod merl;
 pub(crate) mod microfacet;
 pub mod rgl;
 mod spec;
+pub mod surface;
 pub(crate) mod tabulated;
 
 pub use fresnel::{ConductorIor, PRESETS};
@@ -28,6 +29,7 @@ pub use highlight::Highlight;
 pub use merl::Merl;
 pub use microfacet::{BlinnPhong, Family, Microfacet};
 pub use rgl::RglBsdf;
+pub use surface::SurfaceNdf;
 pub use tabulated::TabulatedNdf;
 
 use crate::base::geometry::{cos_sin_phi, half_vector, tan2_theta, Vec3};
@@ -93,6 +95,8 @@ pub enum Model {
     Tabulated(Box<TabulatedNdf>),
     /// A drawn highlight (PNG) mapped to slope space, used as the NDF of a microfacet model.
     Highlight(Box<Highlight>),
+    /// A measured surface (X3P or `.npy` scan), its NDF used as the NDF of a microfacet model.
+    Surface(Box<SurfaceNdf>),
 }
 
 /// A BRDF: a model and, optionally, the conductor the part is made of.
@@ -110,7 +114,9 @@ impl Brdf {
     /// Build a BRDF from a spec string such as `ggx:ax=0.1,ay=0.3,material=gold` or `merl:PATH`.
     ///
     /// Forms: `beckmann:alpha=A`, `ggx:alpha=A`, `ggx:ax=A,ay=B` (also `beckmann:ax=..,ay=..`),
-    /// `ward:ax=A,ay=B`, `blinn:n=N`, `merl:PATH`, `rgl:PATH`, `csv:PATH`, `highlight:PNG` (optionally `,extent_deg=E`, default 30: [`highlight`]), each optionally followed by
+    /// `ward:ax=A,ay=B`, `blinn:n=N`, `merl:PATH`, `rgl:PATH`, `csv:PATH`, `highlight:PNG` (optionally `,extent_deg=E`, default 30: [`highlight`]), `surface:SCAN` (an X3P or
+    /// `.npy` scan; optionally `,filter_um=F`, the pre-filter's σ, default 0, and `,pitch_um=P` for a `.npy`:
+    /// [`surface`]), each optionally followed by
     /// `,material=NAME` (see [`PRESETS`]) or `,eta=E,k=K`. Paths must not contain commas.
     pub fn parse(spec: &str) -> Result<Self, BrdfError> {
         spec::parse(spec)
@@ -149,6 +155,7 @@ impl Brdf {
             Model::Rgl(r) => r.eval(wi, wo),
             Model::Tabulated(t) => microfacet(t.d(&wh), t.g(wi, wo, &wh)),
             Model::Highlight(h) => microfacet(h.d(&wh), h.g(wi, wo, &wh)),
+            Model::Surface(s) => microfacet(s.d(&wh), s.g(wi, wo, &wh)),
         }
     }
 
@@ -159,6 +166,7 @@ impl Brdf {
             Model::Rgl(r) => Some(r.ndf(wm)),
             Model::Tabulated(t) => Some(t.d(wm)),
             Model::Highlight(h) => Some(h.d(wm)),
+            Model::Surface(s) => Some(s.d(wm)),
             _ => None,
         }
     }
@@ -172,7 +180,7 @@ impl Brdf {
             Model::BlinnPhong(b) => Some(b.d(wm)),
             Model::Ward(w) => Microfacet::new(Family::Beckmann, w.alpha_x, w.alpha_y).map(|m| m.d(wm)),
             Model::Merl(_) => None,
-            Model::Rgl(_) | Model::Tabulated(_) | Model::Highlight(_) => self.measured_ndf(wm),
+            Model::Rgl(_) | Model::Tabulated(_) | Model::Highlight(_) | Model::Surface(_) => self.measured_ndf(wm),
         }
     }
 
@@ -186,7 +194,10 @@ impl Brdf {
 
     /// True when [`Brdf::measured_ndf`] answers.
     pub fn has_measured_ndf(&self) -> bool {
-        matches!(self.model, Model::Rgl(_) | Model::Tabulated(_) | Model::Highlight(_))
+        matches!(
+            self.model,
+            Model::Rgl(_) | Model::Tabulated(_) | Model::Highlight(_) | Model::Surface(_)
+        )
     }
 }
 

@@ -11,7 +11,7 @@ fn err(spec: &str, reason: impl Into<String>) -> BrdfError {
     }
 }
 
-const KINDS: &str = "beckmann, ggx, ward, blinn, merl, rgl, csv, highlight";
+const KINDS: &str = "beckmann, ggx, ward, blinn, merl, rgl, csv, highlight, surface";
 
 /// The default `extent_deg` of a `highlight:` spec: the angle of reflection at the middle of the image's
 /// longer axis (the middles of its shorter edges), degrees.
@@ -26,7 +26,7 @@ pub(super) fn parse(spec: &str) -> Result<Brdf, BrdfError> {
     let kind = kind.trim().to_ascii_lowercase();
     let mut tokens: Vec<&str> = rest.split(',').map(str::trim).collect();
     let path = match kind.as_str() {
-        "merl" | "rgl" | "csv" | "highlight" => {
+        "merl" | "rgl" | "csv" | "highlight" | "surface" => {
             let p = tokens.remove(0);
             if p.is_empty() {
                 return Err(err(spec, format!("`{kind}:` needs a file path")));
@@ -95,6 +95,19 @@ pub(super) fn parse(spec: &str) -> Result<Brdf, BrdfError> {
         "highlight" => {
             let extent = positive(&mut params, "extent_deg")?.unwrap_or(DEFAULT_EXTENT_DEG);
             Model::Highlight(Box::new(super::Highlight::read(Path::new(path.unwrap()), extent)?))
+        }
+        "surface" => {
+            let filter = match params.remove("filter_um") {
+                Some(v) if v >= 0.0 => v,
+                Some(v) => return Err(err(spec, format!("`filter_um` must be >= 0, got {v}"))),
+                None => 0.0,
+            };
+            let pitch = positive(&mut params, "pitch_um")?;
+            Model::Surface(Box::new(super::SurfaceNdf::read(
+                Path::new(path.unwrap()),
+                pitch,
+                filter,
+            )?))
         }
         other => return Err(err(spec, format!("unknown model `{other}`; expected one of {KINDS}"))),
     };

@@ -207,8 +207,12 @@ const HEMISPHERE_CELLS: (usize, usize) = (900, 360);
 /// by the midpoint rule on a polar grid (`dω = sinθ dθ dφ`). Where the NDF is known ([`Brdf::known_ndf`]:
 /// the analytic models, data that carries its NDF), that NDF; for reflectance-only data, the estimate
 /// without the masking correction (masking only lowers `f` near grazing, so this understates what
-/// escapes).
+/// escapes). A measured surface adds the share of its slopes beyond its own grid.
 pub fn mass_beyond_grid(brdf: &Brdf, domain: SlopeDomain, cfg: &HalfAngleConfig) -> f64 {
+    if let crate::stages::brdf::Model::Surface(s) = &brdf.model {
+        // a scan's slopes beyond its own grid are not in its NDF: they are beyond this one too
+        return s.outside + (1.0 - s.outside) * mass_outside(domain, |wm| s.d(wm));
+    }
     if brdf.known_ndf(&Vec3::new(0.0, 0.0, 1.0)).is_some() {
         mass_outside(domain, |wm| brdf.known_ndf(wm).unwrap_or(0.0).max(0.0))
     } else {

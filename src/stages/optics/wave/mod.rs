@@ -39,6 +39,7 @@
 
 use crate::base::geometry::Vec3;
 use crate::base::heightfield::Heightfield;
+use crate::base::slope::{splat, SlopeDomain, SlopeGrid};
 use crate::stages::brdf::ConductorIor;
 use rayon::prelude::*;
 use rustfft::num_complex::Complex64;
@@ -607,6 +608,31 @@ pub fn slope_marginals(slice: &WaveSlice) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
         .map(|k| -((m - 1 - k) as f64 - (m / 2) as f64) * slice.dpsi / slice.xi3)
         .collect();
     (p, mx, my)
+}
+
+/// The slope density the wave slice implies, on `domain`: each sample's spectrum `S` at the half-vector
+/// slope `(p, q) = −ψ̄/ξ3` (as [`slope_marginals`] maps it), splatted bilinearly and normalised to unit mass —
+/// the wave-optics counterpart of a surface's geometric NDF (seed §4, §6). Samples beyond the domain are
+/// left out; the second value is their share of `S`.
+pub fn slope_density(slice: &WaveSlice, domain: SlopeDomain) -> (SlopeGrid, f64) {
+    let m = slice.m;
+    let mut g = SlopeGrid::from_fn(domain, |_, _| 0.0);
+    let (mut total, mut outside) = (0.0, 0.0);
+    for b in 0..m {
+        for a in 0..m {
+            let s = slice.spectrum[b * m + a];
+            let (px, py) = slice.psi_bar(a, b);
+            let (p, q) = (-px / slice.xi3, -py / slice.xi3);
+            total += s;
+            if p < domain.p_min || p > domain.p_max || q < domain.q_min || q > domain.q_max {
+                outside += s;
+                continue;
+            }
+            splat(&mut g, p, q, s);
+        }
+    }
+    g.normalise();
+    (g, if total > 0.0 { outside / total } else { 0.0 })
 }
 
 /// Geometric slope marginals on the same grid as [`slope_marginals`]: a histogram of the slopes (linear
