@@ -22,9 +22,13 @@ md5checksum.hex holding the MD5 of main.xml):
   only the offset to a Z value (ISO5436_2Container::ConvertPointToCoord); so for floating-point data the
   increment is not applied, and these heights are the stored metres. (x3pio applies it to every type.)
 
-And `sample-land-x3pio.csv`: the repository's real scan `tests/data/x3p/sample-land.x3p` as x3pio reads it
+And `sample-land-x3pio.csv`: the repository's real scan `examples/data/sample-land.x3p` as x3pio reads it
 (size, increments, invalid count, and every 97th point's height in metres or nan). x3pio refuses the
 file's root element <ISO5436> (the schema's is ISO5436_2), so it reads a copy with only that name changed.
+
+And `brdfmill-f32-x3pio.csv`: `brdfmill-f32.x3p`, which brdfmill's writer made from the surface above (no
+missing points, float32 metres, one pitch of 1.5 um on both axes: `tests/x3p_independent.rs` writes it with
+BRDFMILL_BLESS=1), as x3pio reads it: every height in metres.
 
 Written with Python 3.11.7, NumPy 2.4.6 and x3pio 2.0.0:
 
@@ -151,7 +155,7 @@ def patched_sample_land():
     """sample-land.x3p's main.xml has the root element <ISO5436>, which x3pio refuses (the schema's is
     <p:ISO5436_2>); rename it in a copy held in memory and leave everything else, the binary data included,
     as it is (the checksum of main.xml then no longer matches, so x3pio reads it with verify=False)."""
-    src = zipfile.ZipFile(ROOT / "tests/data/x3p/sample-land.x3p")
+    src = zipfile.ZipFile(ROOT / "examples/data/sample-land.x3p")
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w", compression=zipfile.ZIP_DEFLATED) as dst:
         for info in src.infolist():
@@ -178,12 +182,29 @@ def write_sample_land(out):
     print(f"sample-land.x3p: {nx} x {ny}, {int(np.isnan(flat).sum())} invalid")
 
 
+def read_brdfmill(out):
+    f = x3pio.read(out / "brdfmill-f32.x3p")
+    z = np.asarray(f.layers[0].z)
+    ny, nx = z.shape
+    flat = z.reshape(-1)
+    with open(out / "brdfmill-f32-x3pio.csv", "w") as fh:
+        fh.write(f"# brdfmill-f32.x3p (brdfmill's writer) as x3pio {x3pio.__version__} reads it (metres)\n")
+        fh.write(f"# nx={nx} ny={ny} x_increment={f.header.x.increment!r} y_increment={f.header.y.increment!r} "
+                 f"z_type={f.header.z.data_type!r}\n")
+        fh.write("index,z_m\n")
+        for k in range(flat.size):
+            fh.write(f"{k},{float(flat[k])!r}\n")
+    print(f"brdfmill-f32.x3p: {nx} x {ny}")
+
+
 def main():
     out = Path(sys.argv[1])
     out.mkdir(parents=True, exist_ok=True)
     write_x3pio(out)
     write_handmade(out)
     write_sample_land(out)
+    if (out / "brdfmill-f32.x3p").exists():
+        read_brdfmill(out)
 
 
 if __name__ == "__main__":

@@ -108,6 +108,7 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         "program-2.nc",
         "program.json",
         "sim.npy",
+        "sim.x3p",
         "sim.png",
         "deviation.png",
         "design-vs-cut.png",
@@ -243,6 +244,25 @@ fn default_job_produces_every_artifact_and_the_verdict_its_figures_imply() {
         (zmin - min_z).abs() <= min_z.abs() * 2f64.powi(-24),
         "sim.npy min {zmin}, sim.json {}",
         sj["stats"]["min_z_mm"]
+    );
+    // sim.x3p holds the same heights (float32 metres; x3pio reads this writer's files as written:
+    // tests/x3p_independent.rs), on the pitch sim.json gives
+    let x = brdfmill::base::x3p::read(&p("sim.x3p")).unwrap();
+    assert_eq!((x.nx, x.ny, x.data_type), (cols, rows, 'F'));
+    let pitch_mm = f(&sj["config"]["pitch_um"]) * 1e-3;
+    assert!(
+        (x.pitch_x_mm - pitch_mm).abs() < 1e-12 * pitch_mm,
+        "{} vs {pitch_mm}",
+        x.pitch_x_mm
+    );
+    let worst = z
+        .iter()
+        .zip(&x.z_mm)
+        .map(|(a, b)| (a - b).abs() / a.abs().max(1e-6))
+        .fold(0.0f64, f64::max);
+    assert!(
+        worst <= 2f64.powi(-23),
+        "sim.x3p and sim.npy differ by {worst:e} relative"
     );
 
     let m = json(&p("metrics.json"));

@@ -157,3 +157,51 @@ fn float64_metres_with_a_z_increment_read_as_metres() {
     let worst = check_grid(&s, "hand-f64-inc1e-6", &[], true);
     assert!(worst <= 1e-18, "largest |Δz| {worst:e} mm");
 }
+
+/// brdfmill's writer read by x3pio: `brdfmill-f32.x3p` is the script's surface (no missing points) as
+/// `x3p::write_as(…, Precision::F32)` writes it (the `sim.x3p` of a run), and `brdfmill-f32-x3pio.csv` every
+/// height x3pio read from it. Today's writer must still write that file byte for byte (else the peer read
+/// another writer's output: regenerate with `BRDFMILL_BLESS=1` and the script), and x3pio's heights must be
+/// the surface to float32 rounding (half an ulp of a float32, 2⁻²⁴ relative, plus the float64 → metres
+/// scaling's own rounding).
+#[test]
+fn x3pio_reads_brdfmills_float32_file_as_written() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/peers/x3p");
+    let hf = brdfmill::base::heightfield::Heightfield {
+        nx: NX,
+        ny: NY,
+        pitch_mm: DX * 1e3,
+        periodic: false,
+        z_mm: (0..NX * NY).map(|k| z_m(k % NX, k / NX) * 1e3).collect(),
+    };
+    let tmp = tempfile::tempdir().unwrap();
+    let written = tmp.path().join("brdfmill-f32.x3p");
+    x3p::write_as(&written, &hf, x3p::Precision::F32).unwrap();
+    let kept = dir.join("brdfmill-f32.x3p");
+    if std::env::var_os("BRDFMILL_BLESS").is_some() {
+        std::fs::copy(&written, &kept).unwrap();
+    }
+    assert!(
+        std::fs::read(&written).unwrap() == std::fs::read(&kept).unwrap(),
+        "the writer no longer writes tests/data/peers/x3p/brdfmill-f32.x3p: regenerate it (BRDFMILL_BLESS=1) and \
+         the peer's reading (scripts/peer_x3p_independent.py)"
+    );
+    let csv = std::fs::read_to_string(dir.join("brdfmill-f32-x3pio.csv")).unwrap();
+    let mut n = 0;
+    for line in csv.lines().filter(|l| !l.starts_with('#') && !l.starts_with("index")) {
+        let (k, z) = line.split_once(',').unwrap();
+        let (k, z): (usize, f64) = (k.parse().unwrap(), z.parse().unwrap());
+        let want = z_m(k % NX, k / NX);
+        let bound = want.abs() * 2f64.powi(-24) + 1e-30;
+        assert!(
+            (z - want).abs() <= bound,
+            "point {k}: x3pio {z:e} m, surface {want:e} m"
+        );
+        n += 1;
+    }
+    assert_eq!(n, NX * NY, "x3pio read every point");
+    // and brdfmill's own reader agrees with x3pio's
+    let s = x3p::read(&written).unwrap();
+    assert_eq!(s.data_type, 'F');
+    assert!((s.pitch_x_mm - DX * 1e3).abs() < 1e-15);
+}

@@ -61,6 +61,20 @@ impl<'a> Out<'a> {
         Ok(())
     }
 
+    /// Write a heightfield as an X3P file (ISO 25178-72, float32 metres), for metrology software.
+    pub(super) fn x3p(&mut self, name: &str, hf: &crate::base::heightfield::Heightfield) -> Result<(), JobError> {
+        let p = self.dir.join(name);
+        crate::base::x3p::write_as(&p, hf, crate::base::x3p::Precision::F32).map_err(|e| match e {
+            crate::base::x3p::X3pError::Write(w) => JobError::Write(w),
+            other => JobError::Stage {
+                stage: "simulate",
+                error: super::StageError::Input(other.to_string()),
+            },
+        })?;
+        self.written.push(p);
+        Ok(())
+    }
+
     /// The output folder.
     pub(super) fn dir(&self) -> &Path {
         self.dir
@@ -161,6 +175,7 @@ fn describe(p: &Path) -> String {
         crate::gcode::TOOL_TABLE_FILE => "LinuxCNC tool table for the program (lengths 0: set on the machine)",
         "program.json" => "G-code summary",
         "sim.npy" => "simulated milled heightfield, mm (NumPy)",
+        "sim.x3p" => "simulated milled heightfield, ISO 25178-72 X3P (float32 metres) for metrology software and `brdfmill analyze`",
         "sim.png" => "simulated surface shaded relief",
         "deviation.png" => "simulated minus design",
         "design-vs-cut.png" => "the design and the simulated cut side by side, and along one line",

@@ -240,7 +240,7 @@ pub(super) fn facets_stage(n: &Ndf, tile: Tile, suffix: &str, o: &mut Out) -> Re
     Ok((tile, tile_figure))
 }
 
-/// G-code → milled surface and its deviation from the design: `sim.npy`, `sim.png`, `deviation.png`,
+/// G-code → milled surface and its deviation from the design: `sim.npy`, `sim.x3p`, `sim.png`, `deviation.png`,
 /// `sim.json`.
 fn simulate_stage(
     ready: &Ready,
@@ -255,6 +255,7 @@ fn simulate_stage(
     let sim = simulate::run_files(&program.texts(), &scfg).map_err(stage_err("simulate"))?;
     let dev = simulate::deviation(&sim, design, &shape);
     o.npy("sim.npy", &sim.heightfield)?;
+    o.x3p("sim.x3p", &sim.heightfield)?;
     let sim_canvas = sim.heightfield.relief_png("simulated milled surface", 1024);
     let sim_figure = report::Figure::new(
         "Simulated milled surface",
