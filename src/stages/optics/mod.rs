@@ -7,4 +7,5 @@
 
 pub(crate) mod figures;
 pub mod geometric;
+pub mod gloss;
 pub mod wave;

@@ -71,6 +71,22 @@ pub struct Metrics {
     /// With a `highlight` target: the image, its configuration and the correlations.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub highlight: Option<HighlightMetrics>,
+    /// Gloss, haze and distinctness of image of the target and of the milled surface
+    /// ([`crate::stages::optics::gloss`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub appearance: Option<AppearanceMetrics>,
+}
+
+/// The target's and the milled surface's appearance in a lab's units (`metrics.json` `appearance`), not
+/// checked against a tolerance: the NDF metrics judge the cut, these say what a glossmeter would read.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct AppearanceMetrics {
+    /// How the figures are defined: the standard, the geometries and the receptors.
+    pub method: String,
+    /// The target BRDF's.
+    pub target: crate::stages::optics::gloss::Appearance,
+    /// The milled surface's (its geometric BRDF with the part's material).
+    pub milled: crate::stages::optics::gloss::Appearance,
 }
 
 /// One machine error and the milled figures of a cut with it alone, or with all but it

@@ -232,7 +232,27 @@ fn single_metrics(h: &mut String, m: &Metrics) {
         ));
     }
     h.push_str(&metrics_table(&m.design, &m.milled, ideal));
+    appearance(h, m);
     machine_effects(h, m);
+}
+
+/// What a glossmeter would read off the target and the milled part.
+fn appearance(h: &mut String, m: &Metrics) {
+    let Some(a) = &m.appearance else {
+        return;
+    };
+    h.push_str(&format!(
+        "<h3>Appearance in a lab's units</h3><p>What a glossmeter would read, from each BRDF (not checked against a tolerance): {}.</p>\
+         <table class=\"metrics\"><tr><th>surface</th><th>gloss 20°</th><th>gloss 60°</th><th>gloss 85°</th><th>haze (30°, 2°)</th><th>DOI (30°)</th><th>haze index G60 − G20</th></tr>",
+        rich(&a.method)
+    ));
+    for (name, x) in [("target", &a.target), ("milled (simulated)", &a.milled)] {
+        h.push_str(&format!(
+            "<tr><td>{name}</td><td>{:.1} GU</td><td>{:.1} GU</td><td>{:.1} GU</td><td>{:.2}</td><td>{:.1}</td><td>{:.1} GU</td></tr>",
+            x.gloss_gu[0], x.gloss_gu[1], x.gloss_gu[2], x.haze, x.doi, x.haze_index_gu
+        ));
+    }
+    h.push_str("</table>");
 }
 
 /// Which machine error moved what: the cut with each error alone.

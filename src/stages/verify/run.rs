@@ -288,6 +288,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         arrangements: input.arrangements.to_vec(),
         highlight_corr: highlight.as_ref().map(|h| h.metrics.milled_corr),
         highlight: highlight.as_ref().map(|h| h.metrics.clone()),
+        appearance: Some(appearance(input.target, &milled)),
     };
     let mut figures = figures(
         cfg,
@@ -581,6 +582,23 @@ fn convergence(
         ),
         &plot.render(),
     )
+}
+
+/// What a glossmeter would read off the target and off the milled surface (its geometric BRDF with the
+/// part's material), both at once.
+fn appearance(target: &crate::stages::brdf::Brdf, milled: &SlopeGrid) -> super::AppearanceMetrics {
+    use crate::stages::brdf::luminance;
+    use crate::stages::optics::gloss;
+    let milled_brdf = geometric::MicrofacetBrdf::new(milled.clone(), target.material);
+    let (t, m) = rayon::join(
+        || gloss::appearance(&|a: &Vec3, b: &Vec3| luminance(&target.eval(a, b))),
+        || gloss::appearance(&|a: &Vec3, b: &Vec3| luminance(&milled_brdf.eval(a, b))),
+    );
+    super::AppearanceMetrics {
+        method: gloss::METHOD.to_string(),
+        target: t,
+        milled: m,
+    }
 }
 
 /// The report's figures of the verification stage.
