@@ -735,7 +735,7 @@ pub fn write(path: &Path, hf: &Heightfield) -> Result<(), X3pError> {
     write_as(path, hf, Precision::F64)
 }
 
-/// [`write`] with the heights' type chosen: float32 halves a large simulated cut (`sim.x3p`), and its
+/// [`write()`] with the heights' type chosen: float32 halves a large simulated cut (`sim.x3p`), and its
 /// 24-bit mantissa still resolves 0.1 nm on a millimetre of relief.
 pub fn write_as(path: &Path, hf: &Heightfield, precision: Precision) -> Result<(), X3pError> {
     hf.check_invariants().map_err(|message| X3pError::Invalid {
