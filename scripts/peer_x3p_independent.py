@@ -173,7 +173,7 @@ def write_sample_land(out):
     ny, nx = z.shape
     flat = z.reshape(-1)
     with open(out / "sample-land-x3pio.csv", "w") as fh:
-        fh.write(f"# tests/data/x3p/sample-land.x3p as x3pio {x3pio.__version__} reads it (metres); every 97th point\n")
+        fh.write(f"# examples/data/sample-land.x3p (was tests/data/x3p/) as x3pio {x3pio.__version__} reads it (metres); every 97th point\n")
         fh.write(f"# nx={nx} ny={ny} x_increment={f.header.x.increment!r} y_increment={f.header.y.increment!r} "
                  f"z_increment={f.header.z.increment!r} invalid={int(np.isnan(flat).sum())}\n")
         fh.write("index,z_m\n")

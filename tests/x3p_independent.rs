@@ -160,10 +160,10 @@ fn float64_metres_with_a_z_increment_read_as_metres() {
 
 /// brdfmill's writer read by x3pio: `brdfmill-f32.x3p` is the script's surface (no missing points) as
 /// `x3p::write_as(…, Precision::F32)` writes it (the `sim.x3p` of a run), and `brdfmill-f32-x3pio.csv` every
-/// height x3pio read from it. Today's writer must still write that file byte for byte (else the peer read
-/// another writer's output: regenerate with `BRDFMILL_BLESS=1` and the script), and x3pio's heights must be
-/// the surface to float32 rounding (half an ulp of a float32, 2⁻²⁴ relative, plus the float64 → metres
-/// scaling's own rounding).
+/// height x3pio read from it. Today's writer must still write those entries (`main.xml`, the point data,
+/// the checksum file) byte for byte, decompressed (else the peer read another writer's output: regenerate
+/// with `BRDFMILL_BLESS=1` and the script), and x3pio's heights must be the surface to float32 rounding
+/// (half an ulp of a float32, 2⁻²⁴ relative), and brdfmill's own reading of the file the same as x3pio's.
 #[test]
 fn x3pio_reads_brdfmills_float32_file_as_written() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/peers/x3p");
@@ -181,11 +181,25 @@ fn x3pio_reads_brdfmills_float32_file_as_written() {
     if std::env::var_os("BRDFMILL_BLESS").is_some() {
         std::fs::copy(&written, &kept).unwrap();
     }
+    let entries = |p: &std::path::Path| -> Vec<(String, Vec<u8>)> {
+        let mut z = zip::ZipArchive::new(std::fs::File::open(p).unwrap()).unwrap();
+        (0..z.len())
+            .map(|k| {
+                let mut e = z.by_index(k).unwrap();
+                let mut v = Vec::new();
+                std::io::Read::read_to_end(&mut e, &mut v).unwrap();
+                (e.name().to_string(), v)
+            })
+            .collect()
+    };
     assert!(
-        std::fs::read(&written).unwrap() == std::fs::read(&kept).unwrap(),
-        "the writer no longer writes tests/data/peers/x3p/brdfmill-f32.x3p: regenerate it (BRDFMILL_BLESS=1) and \
-         the peer's reading (scripts/peer_x3p_independent.py)"
+        entries(&written) == entries(&kept),
+        "the writer no longer writes what tests/data/peers/x3p/brdfmill-f32.x3p holds: regenerate it \
+         (BRDFMILL_BLESS=1) and the peer's reading (scripts/peer_x3p_independent.py)"
     );
+    let s = x3p::read(&written).unwrap();
+    assert_eq!(s.data_type, 'F');
+    assert!((s.pitch_x_mm - DX * 1e3).abs() < 1e-15);
     let csv = std::fs::read_to_string(dir.join("brdfmill-f32-x3pio.csv")).unwrap();
     let mut n = 0;
     for line in csv.lines().filter(|l| !l.starts_with('#') && !l.starts_with("index")) {
@@ -197,11 +211,13 @@ fn x3pio_reads_brdfmills_float32_file_as_written() {
             (z - want).abs() <= bound,
             "point {k}: x3pio {z:e} m, surface {want:e} m"
         );
+        // both read the same float32: brdfmill's mm are x3pio's metres × 1000, rounded once
+        assert!(
+            (s.z_mm[k] - z * 1e3).abs() <= (z * 1e3).abs() * 2.3e-16,
+            "point {k}: brdfmill {} mm, x3pio {z:e} m",
+            s.z_mm[k]
+        );
         n += 1;
     }
     assert_eq!(n, NX * NY, "x3pio read every point");
-    // and brdfmill's own reader agrees with x3pio's
-    let s = x3p::read(&written).unwrap();
-    assert_eq!(s.data_type, 'F');
-    assert!((s.pitch_x_mm - DX * 1e3).abs() < 1e-15);
 }

@@ -1,4 +1,4 @@
-//! The real confocal scan in `tests/data/x3p/` (copied from `shared/data/x3p/`): it loads with its invalid
+//! The real confocal scan in `examples/data/` (copied from `shared/data/x3p/`): it loads with its invalid
 //! points, and a surface written by brdfmill reads back within two rounding steps.
 
 use brdfmill::base::heightfield::Heightfield;

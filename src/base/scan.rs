@@ -60,6 +60,11 @@ impl Scan {
             .unwrap_or("")
             .to_ascii_lowercase();
         let x3p = match ext.as_str() {
+            "x3p" if pitch_um.is_some() => {
+                return Err(input(
+                    "an X3P file carries its own pitch: give a pitch only for a .npy".into(),
+                ))
+            }
             "x3p" => crate::base::x3p::read(path)?,
             "npy" => {
                 let pitch = pitch_um.ok_or_else(|| input("a .npy heightfield needs its pitch in µm".into()))?;
@@ -70,6 +75,12 @@ impl Scan {
                     )));
                 }
                 let (ny, nx, z) = crate::base::npy::read_f64_2d(path)?;
+                if nx.checked_mul(ny).is_none_or(|n| n > crate::base::x3p::MAX_POINTS) {
+                    return Err(input(format!(
+                        "{nx}×{ny} points: at most {} (as for an X3P file)",
+                        crate::base::x3p::MAX_POINTS
+                    )));
+                }
                 let valid: Vec<bool> = z.iter().map(|v| v.is_finite()).collect();
                 crate::base::x3p::X3p::from_grid(nx, ny, pitch * 1e-3, z, valid)
             }

@@ -261,14 +261,18 @@ fn verify_single(
             NdfFile::of_surface(&nd.ndf, what, grid, outside).to_json().as_bytes(),
         )?;
     }
+    let mut figures = std::mem::take(&mut v.figures);
+    // a scan target's figures: one that cannot be drawn is a note, not a failed run
+    match super::scan_target::figures(&job.target, &target.target, &sim.heightfield) {
+        Ok(Some(scan)) => figures.extend(scan),
+        Ok(None) => {}
+        Err(e) => v
+            .metrics
+            .notes
+            .push(format!("The scan's figures could not be drawn: {e}.")),
+    }
     let metrics_json = serde_json::to_string_pretty(&v.metrics).map_err(stage_err("verify"))?;
     o.write("metrics.json", metrics_json.as_bytes())?;
-    let mut figures = v.figures;
-    if let Some(scan) = super::scan_target::figures(&job.target, &target.target, &sim.heightfield)
-        .map_err(|e| stage_err("verify")(super::StageError::Input(e)))?
-    {
-        figures.extend(scan);
-    }
     figures.extend(designed.figures);
     figures.extend(sim_figures);
     outcome.setup = super::setup::sheet(

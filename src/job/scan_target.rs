@@ -96,9 +96,9 @@ pub(super) fn single(t: &TargetSection, scan: &str, dir: &Path) -> Result<Region
         let Model::Surface(s) = &target.model else {
             unreachable!("a surface: spec reads as a surface")
         };
-        let density = wave_density(&s.path, t.surface_pitch_um, &cfg)?;
+        let (density, unrepresented) = wave_density(&s.path, t.surface_pitch_um, &cfg)?;
         target.model = Model::Surface(Box::new(
-            s.with_density(&density, Method::Wave)
+            s.with_density(&density, Method::Wave, unrepresented)
                 .map_err(|e| format!("`target.surface`: {e}"))?,
         ));
     }
@@ -111,24 +111,44 @@ pub(super) fn single(t: &TargetSection, scan: &str, dir: &Path) -> Result<Region
 }
 
 /// The wave-optics slope density of a scan: levelled, its Kirchhoff slice at normal incidence by FFT over
-/// coherence windows, mapped to half-vector slopes ([`wave::slope_density`]) on the target's grid.
+/// coherence windows, mapped to half-vector slopes ([`wave::slope_density`]) on the target's grid; and the
+/// share of the scan the slice cannot hold — its slopes of `|∇h| ≥ 1/ξ3 = 0.5`, which this model sends beyond
+/// the horizon, and whatever of the slice falls off the grid — to be counted beyond it.
 pub fn wave_density(
     path: &Path,
     pitch_um: Option<f64>,
     cfg: &WaveConfig,
-) -> Result<crate::base::slope::SlopeGrid, String> {
+) -> Result<(crate::base::slope::SlopeGrid, f64), String> {
     let err = |e: String| format!("`target.surface`: {e}");
+    if cfg.size() > MAX_WAVE_FFT {
+        return Err(format!(
+            "`target.surface_sigma_um` = {} µm at `target.surface_wavelength_um` = {} µm needs {}² FFTs per coherence \
+             window; at most {MAX_WAVE_FFT}² (σ ≤ {:.1} µm at this wavelength)",
+            cfg.sigma_um,
+            cfg.wavelength_um,
+            cfg.size(),
+            MAX_WAVE_FFT as f64 * cfg.sample() / 8.0
+        ));
+    }
     let mut scan = Scan::read(path, pitch_um).map_err(|e| err(e.to_string()))?;
     scan.level();
     let surf = OpticalSurface::new(&scan.hf).map_err(|e| err(e.to_string()))?;
     let slice =
         wave::fft_slice(&surf, &Vec3::new(0.0, 0.0, 1.0), cfg).map_err(|e| err(format!("{}: {e}", path.display())))?;
-    Ok(wave::slope_density(&slice, surface::domain()).0)
+    let (grid, off_grid) = wave::slope_density(&slice, surface::domain());
+    let slopes = scan.slopes(0.0);
+    let limit = 1.0 / slice.xi3;
+    let steep = slopes.iter().filter(|(p, q)| p.hypot(*q) >= limit).count() as f64 / slopes.len().max(1) as f64;
+    Ok((grid, steep + (1.0 - steep) * off_grid))
 }
+
+/// The largest FFT side of the wave estimate (a 2048² complex grid is 64 MB per window in flight).
+pub const MAX_WAVE_FFT: usize = 2048;
 
 /// The report's figures of a surface target: the scan beside the simulated replica, and the scan's BRDF
 /// at normal incidence by both estimates (geometric from its pre-filtered slopes, wave from its Kirchhoff
-/// slice), whichever of the two the job aimed at. `None` for any other target.
+/// slice), whichever of the two the job aimed at. `None` for any other target; an error (a scan too small for
+/// the wave optics, say) the caller turns into a note.
 pub(super) fn figures(
     t: &TargetSection,
     target: &Brdf,
@@ -141,7 +161,8 @@ pub(super) fn figures(
         return Ok(None);
     };
     let err = |e: String| format!("`target.surface`: {e}");
-    let mut scan = Scan::read(&s.path, t.surface_pitch_um).map_err(|e| err(e.to_string()))?;
+    let npy = s.path.extension().is_some_and(|e| e.eq_ignore_ascii_case("npy"));
+    let mut scan = Scan::read(&s.path, npy.then_some(s.pitch_um)).map_err(|e| err(e.to_string()))?;
     scan.level();
     let [w_um, h_um] = [s.size[0] as f64 * s.pitch_um, s.size[1] as f64 * s.pitch_um];
     let pair = Canvas::hstack(&[
@@ -154,7 +175,7 @@ pub(super) fn figures(
         format!(
             "Left: the scan `{}` ({}×{} points at {:.3} µm, {} missing and filled for display), its mean plane \
              ({:.4}, {:.4}) removed; RMS height {:.2} µm. Right: the milled part as the simulation cuts it. The replica \
-             reproduces the scan's distribution of normals (the target), not its heights: its facets are a thousand \
+             reproduces the scan's distribution of normals (the target), not its heights: its facets are hundreds of \
              times larger, so the two reflect alike without looking alike under a microscope.",
             s.path.display(),
             s.size[0],
@@ -168,7 +189,7 @@ pub(super) fn figures(
         &pair,
     );
     // both estimates of the scan's BRDF, whatever the target used
-    let filter_um = t.surface_filter_um.unwrap_or(0.0);
+    let filter_um = s.filter_um;
     let (geo_grid, _) = crate::base::surface::ndf_of_slopes(&scan.slopes(filter_um), surface::domain());
     let geo = MicrofacetBrdf::new(geo_grid, None);
     let cfg = wave_config(t);
@@ -238,6 +259,53 @@ mod tests {
             assert!(st.cov[1][1] < 2e-4, "{method:?}: var q {}", st.cov[1][1]);
             assert!(st.mean[0].abs() < 2e-3, "{method:?}: mean {:?}", st.mean);
             assert!(r.spec.starts_with("surface:") && r.spec.ends_with(",pitch_um=1,material=aluminium"));
+        }
+    }
+
+    /// A sawtooth of unequal facets, 20 µm rising at slope 0.1 then 5 µm falling at 0.4 (period 25 µm,
+    /// sampled at 0.5 µm): by area the steep facet is 1/5 of the surface. The wave estimate gives it that
+    /// share; the geometric one 9/50 (of every 50 central differences, 9 straddle only falling steps, 2 a
+    /// kink). The coherence σ is 30 µm so that each Gaussian window spans five periods and weighs every phase
+    /// of the sawtooth alike (its weight's ripple at the period is exp(−2π²σ²/P²) ≈ e⁻²⁸); with σ 10 µm the
+    /// nine windows sit near the steep facets and read it as 0.27 of the surface.
+    #[test]
+    fn both_estimates_weigh_unequal_facets_by_their_area() {
+        let dir = tempfile::tempdir().unwrap();
+        let (nx, ny, h_um) = (1200usize, 600usize, 0.5);
+        let z: Vec<f64> = (0..nx * ny)
+            .map(|k| {
+                let t = (k % nx) % 50;
+                let up = if t <= 40 {
+                    t as f64
+                } else {
+                    40.0 - 4.0 * (t - 40) as f64
+                };
+                0.1 * up * h_um * 1e-3
+            })
+            .collect();
+        crate::base::npy::write_f64_2d(&dir.path().join("saw.npy"), ny, nx, &z).unwrap();
+        for (method, want, tol) in [(Method::Geometric, 9.0 / 50.0, 0.005), (Method::Wave, 0.2, 0.02)] {
+            let t = TargetSection {
+                surface: Some("saw.npy".into()),
+                surface_pitch_um: Some(h_um),
+                surface_method: Some(method),
+                surface_sigma_um: (method == Method::Wave).then_some(30.0),
+                ..Default::default()
+            };
+            let r = single(&t, "saw.npy", dir.path()).unwrap();
+            let Model::Surface(s) = &r.target.model else { panic!() };
+            let g = s.density();
+            let d = g.domain;
+            let steep: f64 = (0..d.ny)
+                .flat_map(|j| (0..d.nx).map(move |i| (i, j)))
+                .filter(|&(i, _)| d.p_at(i) < -0.25)
+                .map(|(i, j)| g.at(i, j))
+                .sum::<f64>()
+                * d.cell_area();
+            println!("{method:?}: the steep facet's share {steep:.4} (want {want:.4})");
+            assert!((steep - want).abs() < tol, "{method:?}: {steep} vs {want}");
+            // no slope of this surface is as steep as 0.5: the wave estimate holds all of it
+            assert!(s.outside < 1e-9, "{method:?}: outside {}", s.outside);
         }
     }
 

@@ -30,6 +30,10 @@ pub fn domain() -> SlopeDomain {
 /// The largest pre-filter accepted, µm.
 pub const MAX_FILTER_UM: f64 = 1000.0;
 
+/// The widest pre-filter kernel accepted, samples (±3σ): a wider one costs that many multiply-adds per
+/// point, twice.
+pub const MAX_FILTER_TAPS: usize = 1024;
+
 /// How a scan's NDF was estimated.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
 #[serde(rename_all = "kebab-case")]
@@ -86,6 +90,14 @@ impl SurfaceNdf {
             )));
         }
         let mut scan = Scan::read(path, pitch_um).map_err(|e| format(strip_path(&e.to_string(), path)))?;
+        let taps = 6.0 * filter_um / (scan.hf.pitch_mm * 1e3);
+        if taps > MAX_FILTER_TAPS as f64 {
+            return Err(format(format!(
+                "`filter_um` = {filter_um} µm spans {taps:.0} samples of the scan's {:.4} µm pitch (±3σ); at most \
+                 {MAX_FILTER_TAPS}: resample the scan coarser first",
+                scan.hf.pitch_mm * 1e3
+            )));
+        }
         let tilt_removed = scan.level();
         let slopes = scan.slopes(filter_um);
         if slopes.is_empty() {
@@ -115,8 +127,9 @@ impl SurfaceNdf {
     }
 
     /// The same scan with its density estimated otherwise (the wave-optics estimate the job computes):
-    /// resampled onto [`domain`] and normalised. Refused when it has no mass there.
-    pub fn with_density(&self, grid: &SlopeGrid, method: Method) -> Result<Self, BrdfError> {
+    /// resampled onto [`domain`] and normalised, `outside` the share of the scan that estimate cannot
+    /// represent (counted beyond the grid). Refused when it has no mass there.
+    pub fn with_density(&self, grid: &SlopeGrid, method: Method, outside: f64) -> Result<Self, BrdfError> {
         let mut density = SlopeGrid::from_fn(domain(), |p, q| grid.sample(p, q).max(0.0));
         let mass = density.normalise();
         if mass.is_nan() || mass <= 0.0 {
@@ -129,6 +142,7 @@ impl SurfaceNdf {
             smith: SmithTable::new(&density, 48, 48),
             density,
             method,
+            outside: outside.clamp(0.0, 1.0),
             ..self.clone()
         })
     }

@@ -113,7 +113,7 @@ pub struct Appearance {
 }
 
 /// How [`appearance`]'s figures are defined, in a sentence (`metrics.json` carries it beside them).
-pub const METHOD: &str = "specular gloss after ISO 2813 / ASTM D523 at 20°, 60°, 85° (receptors 1.8° × 3.6°, 4.4° × 11.7°, 4.0° × 6.0° in × across the plane of incidence; collimated source; polished black glass n = 1.567 = 100 GU); haze and distinctness of image after ASTM E430 at 30° (a 0.2° × 2.0° receptor 2.0° and 0.3° from the mirror direction against one on it: this tool's apertures, not the standard's table); haze index G60 − G20 after ASTM D4039";
+pub const METHOD: &str = "specular gloss after ISO 2813 / ASTM D523 at 20°, 60°, 85° (receptors 1.8° × 3.6°, 4.4° × 11.7°, 4.0° × 6.0° in × across the plane of incidence; collimated source; polished black glass n = 1.567 = 100 GU); haze and distinctness of image after ASTM E430 at 30° (a 0.2° × 2.0° receptor 2.0° and 0.3° from the mirror direction against one on it: this tool's apertures, not the standard's table); haze index G60 − G20 after ASTM D4039. The milled surface's BRDF is read off its NDF grid (cells of 0.0135 in slope, 0.77° of facet tilt, 1.5° of reflection): its haze and DOI resolve lobes no narrower than a few degrees";
 
 /// Unpolarised Fresnel reflectance of a dielectric of index `n` from air at `cos θ`.
 pub fn dielectric_reflectance(n: f64, cos_theta: f64) -> f64 {
@@ -264,7 +264,7 @@ mod tests {
     #[test]
     fn a_narrow_beckmann_lobe_reads_its_closed_form() {
         let b = Brdf::parse("beckmann:alpha=0.01").unwrap(); // F = 1
-        for r in &D523[..2] {
+        for r in &D523 {
             let th = r.theta_deg.to_radians();
             let (a, c) = (
                 (r.width_deg / 4.0).to_radians() / 0.01,
@@ -279,5 +279,33 @@ mod tests {
             // the small-angle reading is good to O(α²) and the masking to 1 − O(α tan θ): 0.2% is ample
             assert!((got / want - 1.0).abs() < 2e-3, "{}°: {got} vs {want}", r.theta_deg);
         }
+    }
+
+    /// Haze and DOI of a Beckmann lobe of α = 0.02 at 30°, in the same small-angle reading: a receptor from
+    /// `t1` to `t2` off the mirror direction in the plane collects the facets tilted `t1/2` to `t2/2`, a share
+    /// `(erf(t2/2α) − erf(t1/2α))/2` of them, times `erf(h/(4α cosθ))` across the plane. So
+    /// `DOI = 100·(1 − [erf((o + w/2)/2α) − erf((o − w/2)/2α)] / (2 erf(w/4α)))` at `o` = 0.3°, and the haze is
+    /// `100·½[erf((2° + w/2)/2α) − erf((2° − w/2)/2α)]·erf(h/(4α cos 30°))/R_glass(30°)`.
+    #[test]
+    fn haze_and_doi_of_a_beckmann_lobe_read_their_closed_forms() {
+        let alpha = 0.02;
+        let b = Brdf::parse("beckmann:alpha=0.02").unwrap();
+        let a = appearance(&lum(&b));
+        let (w, h, th) = (
+            HAZE_WIDTH_DEG.to_radians(),
+            HAZE_HEIGHT_DEG.to_radians(),
+            HAZE_THETA_DEG.to_radians(),
+        );
+        let band = |o: f64| 0.5 * (libm::erf((o + w / 2.0) / (2.0 * alpha)) - libm::erf((o - w / 2.0) / (2.0 * alpha)));
+        let across = libm::erf(h / (4.0 * alpha * th.cos()));
+        let doi = 100.0 * (1.0 - band(DOI_OFFSET_DEG.to_radians()) / band(0.0));
+        let haze =
+            100.0 * band(HAZE_OFFSET_DEG.to_radians()) * across / dielectric_reflectance(BLACK_GLASS_N, th.cos());
+        println!(
+            "Beckmann α 0.02: DOI {:.3} (closed form {doi:.3}), haze {:.3} ({haze:.3})",
+            a.doi, a.haze
+        );
+        assert!((a.doi / doi - 1.0).abs() < 0.02, "DOI {} vs {doi}", a.doi);
+        assert!((a.haze / haze - 1.0).abs() < 0.02, "haze {} vs {haze}", a.haze);
     }
 }

@@ -611,9 +611,11 @@ pub fn slope_marginals(slice: &WaveSlice) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
 }
 
 /// The slope density the wave slice implies, on `domain`: each sample's spectrum `S` at the half-vector
-/// slope `(p, q) = −ψ̄/ξ3` (as [`slope_marginals`] maps it), splatted bilinearly and normalised to unit mass —
-/// the wave-optics counterpart of a surface's geometric NDF (seed §4, §6). Samples beyond the domain are
-/// left out; the second value is their share of `S`.
+/// slope `(p, q) = −ψ̄/ξ3` (as [`slope_marginals`] maps it), times `cos⁴θh = (1 + p² + q²)⁻²` (in the geometric
+/// limit `S → P22 λ²/ξ3²/cos⁴θh`, module notes), splatted bilinearly and normalised to unit mass — the
+/// wave-optics counterpart of a surface's geometric NDF (seed §4, §6). The slice covers `|ψ̄| < 1`, so slopes
+/// of `|∇h| ≥ 1/ξ3` (0.5 at normal incidence) are not in it at all. Samples beyond the domain are left out;
+/// the second value is their share.
 pub fn slope_density(slice: &WaveSlice, domain: SlopeDomain) -> (SlopeGrid, f64) {
     let m = slice.m;
     let mut g = SlopeGrid::from_fn(domain, |_, _| 0.0);
@@ -623,6 +625,7 @@ pub fn slope_density(slice: &WaveSlice, domain: SlopeDomain) -> (SlopeGrid, f64)
             let s = slice.spectrum[b * m + a];
             let (px, py) = slice.psi_bar(a, b);
             let (p, q) = (-px / slice.xi3, -py / slice.xi3);
+            let s = s / (1.0 + p * p + q * q).powi(2);
             total += s;
             if p < domain.p_min || p > domain.p_max || q < domain.q_min || q > domain.q_max {
                 outside += s;
