@@ -147,8 +147,7 @@ impl Scan {
         } else {
             &self.hf
         };
-        let masked = crate::base::x3p::X3p::from_grid(hf.nx, hf.ny, hf.pitch_mm, hf.z_mm.clone(), self.valid.clone());
-        masked.masked_slopes(1)
+        crate::base::x3p::masked_slopes(&hf.z_mm, &self.valid, hf.nx, [hf.pitch_mm; 2], 1)
     }
 }
 

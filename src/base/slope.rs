@@ -484,6 +484,15 @@ impl SmithTable {
         1.0 / (1.0 + self.lambda(w))
     }
 
+    /// Separable Smith masking–shadowing `G = G1(wi) G1(wo)` of a facet of normal `wm`, 0 when the facet
+    /// faces away from either direction or is vertical.
+    pub fn g2(&self, wi: &Vec3, wo: &Vec3, wm: &Vec3) -> f64 {
+        if wi.dot(wm) <= 0.0 || wo.dot(wm) <= 0.0 || crate::base::geometry::normal_to_slope(wm).is_none() {
+            return 0.0;
+        }
+        self.g1(wi) * self.g1(wo)
+    }
+
     /// [`SmithTable::g1`] at a direction above the horizon given by its angles.
     pub fn g1_at(&self, dir: TableDirection) -> f64 {
         1.0 / (1.0 + self.lambda_at(dir))

@@ -190,7 +190,11 @@ pub(super) fn figures(
     );
     // both estimates of the scan's BRDF, whatever the target used
     let filter_um = s.filter_um;
-    let (geo_grid, _) = crate::base::surface::ndf_of_slopes(&scan.slopes(filter_um), surface::domain());
+    // the geometric estimate is the target's own density when the job aimed at it
+    let geo_grid = match s.method {
+        Method::Geometric => s.density().clone(),
+        Method::Wave => crate::base::surface::ndf_of_slopes(&scan.slopes(filter_um), surface::domain()).0,
+    };
     let geo = MicrofacetBrdf::new(geo_grid, None);
     let cfg = wave_config(t);
     let surf = OpticalSurface::new(&scan.hf).map_err(|e| err(e.to_string()))?;

@@ -225,25 +225,37 @@ impl X3p {
     /// Central-difference slopes `(∂z/∂x, ∂z/∂y)` at every point whose four neighbours and itself are valid
     /// (pairs touching an invalid point are skipped); a border of `margin` (at least 1) points is left out.
     pub fn masked_slopes(&self, margin: usize) -> Vec<(f64, f64)> {
-        let (nx, ny) = (self.nx, self.ny);
-        let m = margin.max(1);
-        let mut out = Vec::new();
-        if nx <= 2 * m || ny <= 2 * m {
-            return out;
-        }
-        for j in m..ny - m {
-            for i in m..nx - m {
-                let k = j * nx + i;
-                if [k, k - 1, k + 1, k - nx, k + nx].iter().all(|q| self.valid[*q]) {
-                    out.push((
-                        (self.z_mm[k + 1] - self.z_mm[k - 1]) / (2.0 * self.pitch_x_mm),
-                        (self.z_mm[k + nx] - self.z_mm[k - nx]) / (2.0 * self.pitch_y_mm),
-                    ));
-                }
+        masked_slopes(
+            &self.z_mm,
+            &self.valid,
+            self.nx,
+            [self.pitch_x_mm, self.pitch_y_mm],
+            margin,
+        )
+    }
+}
+
+/// [`X3p::masked_slopes`] of any grid of heights `z_mm` (`nx` per row) with its validity mask and pitches
+/// `[x, y]` in mm.
+pub fn masked_slopes(z_mm: &[f64], valid: &[bool], nx: usize, pitch_mm: [f64; 2], margin: usize) -> Vec<(f64, f64)> {
+    let ny = z_mm.len() / nx.max(1);
+    let m = margin.max(1);
+    let mut out = Vec::new();
+    if nx <= 2 * m || ny <= 2 * m {
+        return out;
+    }
+    for j in m..ny - m {
+        for i in m..nx - m {
+            let k = j * nx + i;
+            if [k, k - 1, k + 1, k - nx, k + nx].iter().all(|q| valid[*q]) {
+                out.push((
+                    (z_mm[k + 1] - z_mm[k - 1]) / (2.0 * pitch_mm[0]),
+                    (z_mm[k + nx] - z_mm[k - nx]) / (2.0 * pitch_mm[1]),
+                ));
             }
         }
-        out
     }
+    out
 }
 
 fn is_junk(name: &str) -> bool {

@@ -224,10 +224,7 @@ impl Highlight {
 
     /// Separable Smith masking from the distribution's own Λ.
     pub fn g(&self, wi: &Vec3, wo: &Vec3, wm: &Vec3) -> f64 {
-        if wi.dot(wm) <= 0.0 || wo.dot(wm) <= 0.0 || normal_to_slope(wm).is_none() {
-            return 0.0;
-        }
-        self.smith.g1(wi) * self.smith.g1(wo)
+        self.smith.g2(wi, wo, wm)
     }
 
     /// `P22` averaged over each cell of `domain`, normalised to unit mass on the grid. Each cell is

@@ -53,6 +53,9 @@ pub enum BrdfError {
     /// A file could not be opened or read.
     #[error(transparent)]
     Io(#[from] crate::base::io::ReadError),
+    /// A scanned surface could not be read (the error names the file).
+    #[error(transparent)]
+    Scan(#[from] crate::base::scan::ScanError),
     /// A data file is not in the expected format.
     #[error("{path}: {reason}")]
     Format {
@@ -181,6 +184,15 @@ impl Brdf {
             Model::Ward(w) => Microfacet::new(Family::Beckmann, w.alpha_x, w.alpha_y).map(|m| m.d(wm)),
             Model::Merl(_) => None,
             Model::Rgl(_) | Model::Tabulated(_) | Model::Highlight(_) | Model::Surface(_) => self.measured_ndf(wm),
+        }
+    }
+
+    /// The share of the data's distribution of normals its NDF leaves out (a scan's slopes beyond the grid
+    /// it is binned on, or that its wave estimate cannot hold); 0 for every other model.
+    pub fn ndf_mass_left_out(&self) -> f64 {
+        match &self.model {
+            Model::Surface(s) => s.outside,
+            _ => 0.0,
         }
     }
 

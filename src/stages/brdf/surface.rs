@@ -89,7 +89,7 @@ impl SurfaceNdf {
                 "`filter_um` must be in [0, {MAX_FILTER_UM}] µm, got {filter_um}"
             )));
         }
-        let mut scan = Scan::read(path, pitch_um).map_err(|e| format(strip_path(&e.to_string(), path)))?;
+        let mut scan = Scan::read(path, pitch_um)?;
         let taps = 6.0 * filter_um / (scan.hf.pitch_mm * 1e3);
         if taps > MAX_FILTER_TAPS as f64 {
             return Err(format(format!(
@@ -162,17 +162,8 @@ impl SurfaceNdf {
 
     /// Separable Smith masking from the density's own Λ.
     pub fn g(&self, wi: &Vec3, wo: &Vec3, wm: &Vec3) -> f64 {
-        if wi.dot(wm) <= 0.0 || wo.dot(wm) <= 0.0 || normal_to_slope(wm).is_none() {
-            return 0.0;
-        }
-        self.smith.g1(wi) * self.smith.g1(wo)
+        self.smith.g2(wi, wo, wm)
     }
-}
-
-/// A reader's message without the file name the caller adds again.
-fn strip_path(message: &str, path: &Path) -> String {
-    let prefix = format!("{}: ", path.display());
-    message.strip_prefix(&prefix).unwrap_or(message).to_string()
 }
 
 #[cfg(test)]

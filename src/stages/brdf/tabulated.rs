@@ -9,7 +9,7 @@
 //! Used as a BRDF, it is the NDF of a microfacet model whose Smith masking is computed from the table itself.
 
 use super::BrdfError;
-use crate::base::geometry::{cos_sin_phi, normal_to_slope, Vec3};
+use crate::base::geometry::{cos_sin_phi, Vec3};
 use crate::base::slope::{SlopeDomain, SlopeGrid, SmithTable};
 use crate::base::Invalid;
 use std::path::Path;
@@ -171,10 +171,7 @@ impl TabulatedNdf {
 
     /// Separable Smith masking from the table's own Λ.
     pub fn g(&self, wi: &Vec3, wo: &Vec3, wm: &Vec3) -> f64 {
-        if wi.dot(wm) <= 0.0 || wo.dot(wm) <= 0.0 || normal_to_slope(wm).is_none() {
-            return 0.0;
-        }
-        self.smith.g1(wi) * self.smith.g1(wo)
+        self.smith.g2(wi, wo, wm)
     }
 }
 

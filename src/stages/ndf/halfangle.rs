@@ -209,15 +209,14 @@ const HEMISPHERE_CELLS: (usize, usize) = (900, 360);
 /// without the masking correction (masking only lowers `f` near grazing, so this understates what
 /// escapes). A measured surface adds the share of its slopes beyond its own grid.
 pub fn mass_beyond_grid(brdf: &Brdf, domain: SlopeDomain, cfg: &HalfAngleConfig) -> f64 {
-    if let crate::stages::brdf::Model::Surface(s) = &brdf.model {
-        // a scan's slopes beyond its own grid are not in its NDF: they are beyond this one too
-        return s.outside + (1.0 - s.outside) * mass_outside(domain, |wm| s.d(wm));
-    }
-    if brdf.known_ndf(&Vec3::new(0.0, 0.0, 1.0)).is_some() {
+    // mass the data has but its NDF leaves out (a scan's slopes beyond its own grid) is beyond this one too
+    let lost = brdf.ndf_mass_left_out();
+    let beyond = if brdf.known_ndf(&Vec3::new(0.0, 0.0, 1.0)).is_some() {
         mass_outside(domain, |wm| brdf.known_ndf(wm).unwrap_or(0.0).max(0.0))
     } else {
         mass_outside(domain, |wm| reflectance_d(brdf, wm, cfg))
-    }
+    };
+    lost + (1.0 - lost) * beyond
 }
 
 /// `1 − ∫_grid D cosθ dω / ∫_hemisphere D cosθ dω` for a distribution `d(wm)` (see [`mass_beyond_grid`]).

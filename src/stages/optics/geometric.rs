@@ -23,6 +23,11 @@ impl MicrofacetBrdf {
         Self { ndf, smith, material }
     }
 
+    /// The slope density it was built from.
+    pub fn ndf(&self) -> &SlopeGrid {
+        &self.ndf
+    }
+
     /// `D(wm) = P22(p, q) / cos⁴θm`.
     pub fn d(&self, wm: &Vec3) -> f64 {
         match normal_to_slope(wm) {

@@ -115,14 +115,10 @@ pub struct Appearance {
 /// How [`appearance`]'s figures are defined, in a sentence (`metrics.json` carries it beside them).
 pub const METHOD: &str = "specular gloss after ISO 2813 / ASTM D523 at 20°, 60°, 85° (receptors 1.8° × 3.6°, 4.4° × 11.7°, 4.0° × 6.0° in × across the plane of incidence; collimated source; polished black glass n = 1.567 = 100 GU); haze and distinctness of image after ASTM E430 at 30° (a 0.2° × 2.0° receptor 2.0° and 0.3° from the mirror direction against one on it: this tool's apertures, not the standard's table); haze index G60 − G20 after ASTM D4039. The milled surface's BRDF is read off its NDF grid (cells of 0.0135 in slope, 0.77° of facet tilt, 1.5° of reflection): its haze and DOI resolve lobes no narrower than a few degrees";
 
-/// Unpolarised Fresnel reflectance of a dielectric of index `n` from air at `cos θ`.
+/// Unpolarised Fresnel reflectance of a dielectric of index `n` from air at `cos θ`: the conductor's
+/// exact Fresnel term with no absorption (`κ = 0`).
 pub fn dielectric_reflectance(n: f64, cos_theta: f64) -> f64 {
-    let c = cos_theta.clamp(0.0, 1.0);
-    let s2 = 1.0 - c * c;
-    let ct = (1.0 - s2 / (n * n)).max(0.0).sqrt();
-    let rs = (c - n * ct) / (c + n * ct);
-    let rp = (n * c - ct) / (n * c + ct);
-    0.5 * (rs * rs + rp * rp)
+    crate::stages::brdf::fresnel::fresnel_conductor(cos_theta, n, 0.0)
 }
 
 /// `∫_A f(ωi, ωo) cosθo dωo` over the receptor, for the light incident at its angle in the x–z plane

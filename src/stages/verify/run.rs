@@ -271,6 +271,9 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         n.base_spec.as_deref().unwrap_or("none"),
         measurement.scallops
     );
+    // the milled surface's geometric BRDF (its Smith table an integral over the grid), for the glossmeter's
+    // figures and the report's, built once
+    let milled_brdf = geometric::MicrofacetBrdf::new(milled.clone(), input.target.material);
     let metrics = Metrics {
         version: 1,
         pass: milled_m.pass,
@@ -288,13 +291,13 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
         arrangements: input.arrangements.to_vec(),
         highlight_corr: highlight.as_ref().map(|h| h.metrics.milled_corr),
         highlight: highlight.as_ref().map(|h| h.metrics.clone()),
-        appearance: Some(appearance(input.target, &milled)),
+        appearance: Some(appearance(input.target, &milled_brdf)),
     };
     let mut figures = figures(
         cfg,
         input,
         &design,
-        &milled,
+        &milled_brdf,
         &wave_png,
         wave_albedo,
         metrics.diffraction.is_some(),
@@ -586,10 +589,9 @@ fn convergence(
 
 /// What a glossmeter would read off the target and off the milled surface (its geometric BRDF with the
 /// part's material), both at once.
-fn appearance(target: &crate::stages::brdf::Brdf, milled: &SlopeGrid) -> super::AppearanceMetrics {
+fn appearance(target: &crate::stages::brdf::Brdf, milled_brdf: &geometric::MicrofacetBrdf) -> super::AppearanceMetrics {
     use crate::stages::brdf::luminance;
     use crate::stages::optics::gloss;
-    let milled_brdf = geometric::MicrofacetBrdf::new(milled.clone(), target.material);
     let (t, m) = rayon::join(
         || gloss::appearance(&|a: &Vec3, b: &Vec3| luminance(&target.eval(a, b))),
         || gloss::appearance(&|a: &Vec3, b: &Vec3| luminance(&milled_brdf.eval(a, b))),
@@ -606,7 +608,7 @@ fn figures(
     cfg: &VerifyConfig,
     input: &VerifyInput,
     design: &SlopeGrid,
-    milled: &SlopeGrid,
+    milled_brdf: &geometric::MicrofacetBrdf,
     wave_png: &Canvas,
     wave_albedo: f64,
     diffracts: bool,
@@ -615,10 +617,9 @@ fn figures(
     let ndf_row = Canvas::hstack(&[
         ndf::render_png(&input.ndf.observed, "target: observed O"),
         ndf::render_png(design, "design tile * base lobe"),
-        ndf::render_png(milled, "milled (simulated)"),
+        ndf::render_png(milled_brdf.ndf(), "milled (simulated)"),
     ]);
     let design_brdf = geometric::MicrofacetBrdf::new(design.clone(), material);
-    let milled_brdf = geometric::MicrofacetBrdf::new(milled.clone(), material);
     let tf = |a: &Vec3, b: &Vec3| input.target.eval(a, b);
     let df = |a: &Vec3, b: &Vec3| design_brdf.eval(a, b);
     let mf = |a: &Vec3, b: &Vec3| milled_brdf.eval(a, b);
