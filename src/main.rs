@@ -1,7 +1,7 @@
 //! `brdfmill` — the command line. A thin layer over the library: it parses arguments, reads and writes
 //! files, draws progress and maps errors to exit codes: 0 success, 1 an error or a refused input (the message
 //! names the file and the field), 2 a bad command line, 3 a `run` that completed but falls short of its
-//! tolerances (`--allow-shortfall` makes that 0).
+//! tolerances (`--allow-shortfall` makes that 0), or a `compare` whose scan falls short.
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -41,6 +41,13 @@ enum Command {
     /// A measured (X3P) or simulated (.npy) surface → NDF and BRDF, geometric and wave optics, with a report
     /// in DIR.
     Analyze(cli::analyze::Args),
+    /// A scan of the milled part (X3P or .npy) against the job that made it: registered to the simulated cut
+    /// (quarter turns, small angles, translation, tilt), measured as the verdict measures the cut, with the
+    /// difference map. Writes DIR/compare.json, compare.html, difference.png, ndf-scan.json.
+    Compare(cli::compare::Args),
+    /// A job's BRDFs for other tools: the target's, the design tile's and the simulated milled surface's as
+    /// MERL .binary tables (target.binary, design.binary, milled.binary) in DIR (default: the job's folder).
+    Export(cli::export::Args),
     /// Machine profile → a calibration coupon (program, reading sheet, dimensions) whose slots measure the
     /// profile's backlash, runout and steps per mm with calipers. Writes DIR/calibrate.nc, calibrate.md,
     /// calibrate.json (and tool.tbl for LinuxCNC).
@@ -60,6 +67,8 @@ fn main() {
         Command::Emulate(a) => ok(cli::emulate::run(&a)),
         Command::Analyze(a) => ok(cli::analyze::run(&a)),
         Command::Calibrate(a) => ok(cli::calibrate::run(&a)),
+        Command::Compare(a) => cli::compare::run(&a),
+        Command::Export(a) => ok(cli::export::run(&a)),
     };
     match result {
         Ok(0) => {}

@@ -11,6 +11,7 @@ pub(crate) mod image;
 pub mod io;
 pub mod npy;
 pub mod plot;
+pub mod register;
 pub mod scan;
 pub mod slope;
 pub mod stl;

@@ -42,7 +42,9 @@ macro_rules! eprint {
 
 pub mod analyze;
 pub mod calibrate;
+pub mod compare;
 pub mod emulate;
+pub mod export;
 pub mod facets;
 pub mod ndf;
 pub mod run;

@@ -12,6 +12,8 @@ fn write_state(o: &mut Out, job: &str, done: &[(Stage, f64)], state: &str) -> Re
         "format": "brdfmill-run",
         "version": 1,
         "job": job,
+        // the folder the job file's paths are read from: `brdfmill compare` reloads `job.toml` in it
+        "job_dir": o.job_dir.display().to_string(),
         "state": state,
         "stages_done": done.iter().map(|(s, _)| s.name()).collect::<Vec<_>>(),
     });
@@ -25,17 +27,20 @@ pub(super) struct Out<'a> {
     dir: &'a Path,
     written: Vec<PathBuf>,
     job: String,
+    job_dir: PathBuf,
     timings: Vec<(Stage, f64)>,
     clock: std::time::Instant,
 }
 
 impl<'a> Out<'a> {
-    /// Start a run into `dir`: `run.json` says it is running.
-    pub(super) fn new(dir: &'a Path, job: &str) -> Result<Self, JobError> {
+    /// Start a run into `dir` of the job named `job` whose file is in `job_dir`: `run.json` says it is
+    /// running.
+    pub(super) fn new(dir: &'a Path, job: &str, job_dir: &Path) -> Result<Self, JobError> {
         let mut o = Out {
             dir,
             written: vec![],
             job: job.to_string(),
+            job_dir: std::path::absolute(job_dir).unwrap_or_else(|_| job_dir.to_path_buf()),
             timings: vec![],
             clock: std::time::Instant::now(),
         };
@@ -183,6 +188,7 @@ fn describe(p: &Path) -> String {
         "metrics.json" => "verification metrics and verdict",
         "wave.png" => "wave (Kirchhoff) and geometric BRDF of a milled patch",
         "report.html" => "this report",
+        "job.toml" => "the job as it ran (overrides applied, budgets derived): `brdfmill compare` measures a scan of the part with it",
         _ if name.ends_with(".binary") => "MERL file written from `target.merl_from`, read back as the target",
         _ => "",
     }

@@ -320,6 +320,41 @@ impl Job {
         t
     }
 
+    /// The job as TOML (`job.toml` in the output folder): reading it back composes the same job.
+    pub fn to_toml(&self) -> Result<String, StageError> {
+        let fail = |e: String| StageError::Input(format!("the job cannot be written as TOML: {e}"));
+        // through JSON, where a derived seed above TOML's largest integer (2⁶³ − 1) becomes the text the job
+        // format reads seeds from (`base::de::seed`), and an absent option (null) is left out
+        fn fit(v: serde_json::Value) -> Option<serde_json::Value> {
+            use serde_json::Value;
+            match v {
+                Value::Null => None,
+                Value::Number(n) if n.as_u64().is_some_and(|u| u > i64::MAX as u64) => {
+                    Some(Value::String(n.to_string()))
+                }
+                Value::Array(a) => Some(Value::Array(a.into_iter().filter_map(fit).collect())),
+                Value::Object(o) => Some(Value::Object(
+                    o.into_iter().filter_map(|(k, v)| fit(v).map(|v| (k, v))).collect(),
+                )),
+                other => Some(other),
+            }
+        }
+        let json = serde_json::to_value(self).map_err(|e| fail(e.to_string()))?;
+        let value = toml::Value::try_from(fit(json).unwrap_or_default()).map_err(|e| fail(e.to_string()))?;
+        toml::to_string(&value).map_err(|e| fail(e.to_string()))
+    }
+
+    /// Read a job file written by [`Job::to_toml`] (an output folder's `job.toml`), its paths read from
+    /// `dir`, the folder of the job file it was written from.
+    pub fn load_in(path: &Path, dir: &Path) -> Result<Ready, JobError> {
+        let (job, given) = Job::parse(path, &[])?;
+        job.compose(dir.to_path_buf(), given)
+            .map_err(|reason| JobError::Invalid {
+                path: path.display().to_string(),
+                reason,
+            })
+    }
+
     /// Read a job file and compose the stages' plans: everything that can be checked before work starts.
     pub fn load(path: &Path) -> Result<Ready, JobError> {
         Job::load_with(path, &[])
@@ -662,6 +697,8 @@ pub(crate) fn resolve_spec(spec: &str, dir: &Path) -> String {
 }
 
 mod artifacts;
+pub mod compare;
+pub mod export;
 mod outcome;
 mod runner;
 mod scan_target;

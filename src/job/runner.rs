@@ -18,13 +18,18 @@ use crate::stages::verify::regions::{RegionInput, RegionsInput};
 use crate::stages::verify::{self, report, VerifyInput};
 use std::path::Path;
 
+/// The job as it ran, in the output folder.
+pub const JOB_AS_RUN: &str = "job.toml";
+
 /// The polish lobe's Beckmann α when the job names none (the moving-light pictures only).
 const DEFAULT_POLISH_ALPHA: f64 = 0.06;
 
 /// Run the stages in order up to and including `until`, writing each artifact to `out` as it is made;
 /// `progress` hears of every stage's start and end, of every design round and of each region.
 pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Progress)) -> Result<Outcome, JobError> {
-    let mut o = Out::new(out, &ready.job.name)?;
+    let mut o = Out::new(out, &ready.job.name, &ready.dir)?;
+    // the job as it runs (overrides applied, budgets derived): what `brdfmill compare` measures a scan with
+    o.write(JOB_AS_RUN, ready.job.to_toml().map_err(stage_err("ndf"))?.as_bytes())?;
     let mut outcome = empty_outcome(ready);
     let targets = prepare_targets(ready, &mut o, progress)?;
 

@@ -163,6 +163,17 @@ pub(super) fn ndf_stage(
     stepover: f64,
     o: &mut Out,
 ) -> Result<NdfStage, JobError> {
+    let nd = ndf_of(ready, target, tool, stepover)?;
+    o.write(
+        &format!("ndf{suffix}.json"),
+        NdfFile::from(&nd.ndf).to_json().as_bytes(),
+    )?;
+    o.write(&format!("ndf{suffix}.png"), &ndf::render_pair_png(&nd.ndf).to_png())?;
+    Ok(nd)
+}
+
+/// The NDF stage's products for `target`, written nowhere (`brdfmill compare` remakes them from `job.toml`).
+pub(super) fn ndf_of(ready: &Ready, target: &Brdf, tool: &Shape, stepover: f64) -> Result<NdfStage, JobError> {
     let job = &ready.job;
     let domain = job.ndf.domain();
     let polish = match &job.target.polish {
@@ -188,8 +199,6 @@ pub(super) fn ndf_stage(
         }
     };
     let n = ndf::run_with_kernel(&job.ndf, target, kernel.as_ref()).map_err(stage_err("ndf"))?;
-    o.write(&format!("ndf{suffix}.json"), NdfFile::from(&n).to_json().as_bytes())?;
-    o.write(&format!("ndf{suffix}.png"), &ndf::render_pair_png(&n).to_png())?;
     Ok(NdfStage { ndf: n, kernel, polish })
 }
 

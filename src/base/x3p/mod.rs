@@ -185,33 +185,46 @@ impl X3p {
         let (nx, ny) = (self.nx, self.ny);
         let mut z = self.z_mm.clone();
         let mut known = self.valid.clone();
-        let mut todo: Vec<usize> = (0..nx * ny).filter(|k| !known[*k]).collect();
-        while !todo.is_empty() {
-            let mut fills = Vec::new();
-            for &k in &todo {
-                let (i, j) = ((k % nx) as isize, (k / nx) as isize);
-                let (mut s, mut n) = (0.0, 0);
-                for dj in -1..=1 {
-                    for di in -1..=1 {
-                        let (a, b) = (i + di, j + dj);
-                        if (di, dj) != (0, 0) && a >= 0 && b >= 0 && a < nx as isize && b < ny as isize {
-                            let q = b as usize * nx + a as usize;
-                            if known[q] {
-                                s += z[q];
-                                n += 1;
-                            }
-                        }
-                    }
-                }
-                if n > 0 {
-                    fills.push((k, s / n as f64));
-                }
-            }
+        let neighbours = |k: usize| {
+            let (i, j) = ((k % nx) as isize, (k / nx) as isize);
+            (-1..=1isize)
+                .flat_map(move |dj| (-1..=1isize).map(move |di| (i + di, j + dj, di, dj)))
+                .filter(move |&(a, b, di, dj)| {
+                    (di, dj) != (0, 0) && a >= 0 && b >= 0 && a < nx as isize && b < ny as isize
+                })
+                .map(move |(a, b, _, _)| b as usize * nx + a as usize)
+        };
+        // each round fills the missing points next to a known one, from the values known at its start; only
+        // that frontier is visited, so a wide missing border costs its area, not its area times its depth
+        let mut queued = vec![false; nx * ny];
+        let mut frontier: Vec<usize> = (0..nx * ny)
+            .filter(|&k| !known[k] && neighbours(k).any(|q| known[q]))
+            .collect();
+        frontier.iter().for_each(|&k| queued[k] = true);
+        while !frontier.is_empty() {
+            let fills: Vec<(usize, f64)> = frontier
+                .iter()
+                .map(|&k| {
+                    let (s, n) = neighbours(k)
+                        .filter(|&q| known[q])
+                        .fold((0.0, 0usize), |(s, n), q| (s + z[q], n + 1));
+                    (k, s / n as f64)
+                })
+                .collect();
             for (k, v) in &fills {
                 z[*k] = *v;
                 known[*k] = true;
             }
-            todo.retain(|k| !known[*k]);
+            let mut next = Vec::new();
+            for (k, _) in &fills {
+                for q in neighbours(*k) {
+                    if !known[q] && !queued[q] {
+                        queued[q] = true;
+                        next.push(q);
+                    }
+                }
+            }
+            frontier = next;
         }
         Ok(Heightfield {
             nx,

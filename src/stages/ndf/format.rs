@@ -129,6 +129,8 @@ pub enum DensityOf {
     Design,
     /// The simulated cut's slopes convolved with the polish lobe (`ndf-milled.json`).
     Milled,
+    /// A scan of the milled part measured as the cut is (`ndf-scan.json` of `brdfmill compare`).
+    Scan,
 }
 
 /// An `ndf.json` that cannot be used.

@@ -14,7 +14,7 @@
 pub(crate) mod explain;
 pub(crate) mod highlight;
 pub(crate) mod metrics;
-pub(crate) mod milled;
+pub mod milled;
 pub mod regions;
 pub(crate) mod render;
 pub(crate) mod report;
@@ -22,7 +22,7 @@ mod run;
 
 pub use metrics::{SurfaceMetrics, Tolerances};
 pub use regions::{RegionMetrics, RegionsMetrics};
-pub use run::{measure_cut, measure_shape, run, VerifyConfig, VerifyError, VerifyInput, VerifyOutput};
+pub use run::{measure_cut, measure_shape, run, Gauge, VerifyConfig, VerifyError, VerifyInput, VerifyOutput};
 
 use serde::{Deserialize, Serialize};
 

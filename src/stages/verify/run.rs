@@ -374,63 +374,149 @@ fn machine_note(sim: &Simulation, milled: &SurfaceMetrics, ideal: &SurfaceMetric
     Some(s)
 }
 
-/// The band of the simulated stock left out of the milled NDF, cells: one tool radius grazed, one cut from
-/// one side only, a design sample either side, and the half stepover the slope mean reaches.
-fn milled_margin(input: &VerifyInput) -> usize {
-    let r = input.tool.radius_mm();
-    let p = input.sim.heightfield.pitch_mm;
-    ((2.0 * r + 2.0 * input.tile.heightfield.pitch_mm) / p).ceil() as usize + milled::reach_cells(p, input.stepover_mm)
+/// What measuring a cut as the verdict does needs of the job: the target, its NDF and grid, the lobes, the
+/// finishing raster and the tile. The verdict's milled surface and a scan of the part (`brdfmill compare`)
+/// are measured by the same gauge.
+pub struct Gauge<'a> {
+    /// The target BRDF.
+    pub target: &'a Brdf,
+    /// The NDF stage's result (its observed distribution is the reference).
+    pub ndf: &'a Ndf,
+    /// The NDF stage's settings.
+    pub ndf_config: &'a NdfConfig,
+    /// The base lobe the NDF stage deconvolved, if any.
+    pub base: Option<&'a Kernel>,
+    /// The base lobe is the finishing raster's scallop lobe.
+    pub base_is_scallop: bool,
+    /// The material's polish lobe.
+    pub polish: Option<&'a Brdf>,
+    /// The finishing tool as the machine cuts with it.
+    pub tool: crate::cut::tool::Shape,
+    /// Finishing stepover, mm.
+    pub stepover_mm: f64,
+    /// Angle of the finishing passes from x, degrees.
+    pub raster_angle_deg: f64,
+    /// The machinable cone, degrees.
+    pub cone_deg: f64,
+    /// The tile's period along x and y, mm.
+    pub tile_mm: [f64; 2],
+    /// The design tile's sample pitch, mm.
+    pub tile_pitch_mm: f64,
 }
 
-/// The milled surface's NDF as `milled` describes: whole tiles, slopes averaged over a stepover, the
-/// scallop lobe (with the polish) convolved back. Returns the NDF, the fraction of slopes beyond the grid,
-/// and how it was measured.
-fn milled_ndf(cfg: &VerifyConfig, input: &VerifyInput) -> Result<(SlopeGrid, f64, Measurement), VerifyError> {
-    let n = input.ndf;
-    let domain = n.config.domain();
-    let margin = milled_margin(input);
-    let hf = &input.sim.heightfield;
-    let c = &input.tile.config;
-    let tile_mm = [c.facets_x as f64 * c.facet_mm, c.facets_y as f64 * c.facet_mm];
-    let win = milled::window(hf, margin, tile_mm).ok_or(VerifyError::TooSmall {
-        side_mm: cfg.wave_patch_mm,
-        margin,
-    })?;
-    let mut slopes = milled::slopes(hf, &win, input.raster_angle_deg, input.stepover_mm);
-    if cfg.prefilter_um > 0.0 {
-        // the pre-filter is a Gaussian of the heights; the stepover mean already smooths below a stepover
-        let f = surface::gaussian(hf, cfg.prefilter_um * 1e-3);
-        slopes = milled::slopes(&f, &win, input.raster_angle_deg, input.stepover_mm);
+impl VerifyInput<'_> {
+    /// The gauge of this job.
+    pub fn gauge(&self) -> Gauge<'_> {
+        let c = &self.tile.config;
+        Gauge {
+            target: self.target,
+            ndf: self.ndf,
+            ndf_config: self.ndf_config,
+            base: self.base,
+            base_is_scallop: self.base_is_scallop,
+            polish: self.polish,
+            tool: self.tool,
+            stepover_mm: self.stepover_mm,
+            raster_angle_deg: self.raster_angle_deg,
+            cone_deg: self.cone_deg,
+            tile_mm: [c.facets_x as f64 * c.facet_mm, c.facets_y as f64 * c.facet_mm],
+            tile_pitch_mm: self.tile.heightfield.pitch_mm,
+        }
     }
-    let (raw, outside) = surface::ndf_of_slopes(&slopes, domain);
-    let lobe = match input.base {
-        Some(k) if input.base_is_scallop => k.clone(),
-        _ => Kernel::scallop(
-            &domain,
-            &input.tool,
-            input.stepover_mm,
-            input.raster_angle_deg,
-            input.polish,
-            input.ndf_config,
-        )?,
-    };
-    let milled = normalised(lobe.convolve(&raw));
-    let cone_tan = input.cone_deg.to_radians().tan();
-    // the target's mass the facets cannot draw: beyond the grid (steeper than any of its cells; the facets
-    // sample the grid) or inside it beyond the cone
-    let in_grid = 1.0 - n.observed.cut_to_cone(cone_tan).mass() / n.observed.mass().max(1e-300);
-    let g = n.mass_beyond_grid.clamp(0.0, 1.0);
-    let beyond = g + (1.0 - g) * in_grid.clamp(0.0, 1.0);
-    let measurement = Measurement {
-        window: win,
-        margin_cells: margin,
-        margin_mm: margin as f64 * hf.pitch_mm,
-        scallops: lobe.label.clone(),
-        cone_deg: input.cone_deg,
-        target_mass_beyond_cone: beyond,
-        outside_grid: outside,
-    };
-    Ok((milled, outside, measurement))
+}
+
+impl Gauge<'_> {
+    /// The band of a surface at pitch `pitch_mm` left out of its NDF, cells: one tool radius grazed, one cut
+    /// from one side only, a design sample either side, and the half stepover the slope mean reaches.
+    pub fn margin(&self, pitch_mm: f64) -> usize {
+        let r = self.tool.radius_mm();
+        ((2.0 * r + 2.0 * self.tile_pitch_mm) / pitch_mm).ceil() as usize
+            + milled::reach_cells(pitch_mm, self.stepover_mm)
+    }
+
+    /// The window the verdict measures on a cut `hf`: whole tiles in its interior ([`milled::window`]).
+    pub fn window(
+        &self,
+        cfg: &VerifyConfig,
+        hf: &crate::base::heightfield::Heightfield,
+    ) -> Result<milled::Window, VerifyError> {
+        let margin = self.margin(hf.pitch_mm);
+        milled::window(hf, margin, self.tile_mm).ok_or(VerifyError::TooSmall {
+            side_mm: cfg.wave_patch_mm,
+            margin,
+        })
+    }
+
+    /// The NDF of the surface `hf` in the window `win`, as `milled` describes: slopes averaged over a
+    /// stepover, the scallop lobe (with the polish) convolved back. Returns the NDF, the fraction of slopes
+    /// beyond the grid, and how it was measured. The window must lie [`milled::reach_cells`] inside `hf`.
+    pub fn measure(
+        &self,
+        cfg: &VerifyConfig,
+        hf: &crate::base::heightfield::Heightfield,
+        win: &milled::Window,
+    ) -> Result<(SlopeGrid, f64, Measurement), VerifyError> {
+        let n = self.ndf;
+        let domain = n.config.domain();
+        let mut slopes = milled::slopes(hf, win, self.raster_angle_deg, self.stepover_mm);
+        if cfg.prefilter_um > 0.0 {
+            // the pre-filter is a Gaussian of the heights; the stepover mean already smooths below a stepover
+            let f = surface::gaussian(hf, cfg.prefilter_um * 1e-3);
+            slopes = milled::slopes(&f, win, self.raster_angle_deg, self.stepover_mm);
+        }
+        let (raw, outside) = surface::ndf_of_slopes(&slopes, domain);
+        let lobe = match self.base {
+            Some(k) if self.base_is_scallop => k.clone(),
+            _ => Kernel::scallop(
+                &domain,
+                &self.tool,
+                self.stepover_mm,
+                self.raster_angle_deg,
+                self.polish,
+                self.ndf_config,
+            )?,
+        };
+        let milled = normalised(lobe.convolve(&raw));
+        let cone_tan = self.cone_deg.to_radians().tan();
+        // the target's mass the facets cannot draw: beyond the grid (steeper than any of its cells; the facets
+        // sample the grid) or inside it beyond the cone
+        let in_grid = 1.0 - n.observed.cut_to_cone(cone_tan).mass() / n.observed.mass().max(1e-300);
+        let g = n.mass_beyond_grid.clamp(0.0, 1.0);
+        let beyond = g + (1.0 - g) * in_grid.clamp(0.0, 1.0);
+        let margin = self.margin(hf.pitch_mm);
+        let measurement = Measurement {
+            window: *win,
+            margin_cells: margin,
+            margin_mm: margin as f64 * hf.pitch_mm,
+            scallops: lobe.label.clone(),
+            cone_deg: self.cone_deg,
+            target_mass_beyond_cone: beyond,
+            outside_grid: outside,
+        };
+        Ok((milled, outside, measurement))
+    }
+
+    /// The verdict's figures of a measured NDF against the target (without the highlight's, which needs
+    /// the design).
+    pub fn metrics(&self, cfg: &VerifyConfig, measured: &SlopeGrid) -> SurfaceMetrics {
+        let cone_tan = self.cone_deg.to_radians().tan();
+        metrics::measure(
+            &self.ndf.observed,
+            measured,
+            self.target,
+            &cfg.incident_deg,
+            &cfg.tolerances,
+            cone_tan,
+        )
+    }
+}
+
+/// The milled surface's NDF as the verdict measures it ([`Gauge::measure`] in [`Gauge::window`]).
+fn milled_ndf(cfg: &VerifyConfig, input: &VerifyInput) -> Result<(SlopeGrid, f64, Measurement), VerifyError> {
+    let gauge = input.gauge();
+    let hf = &input.sim.heightfield;
+    let win = gauge.window(cfg, hf)?;
+    gauge.measure(cfg, hf, &win)
 }
 
 /// The target's mass beyond the machinable cone, when it matters (over 0.01%): the milled lobe lacks that

@@ -1,0 +1,183 @@
+//! The coarse search: every quarter turn and small angle, each with the translation that maximises the
+//! masked normalised cross-correlation (Padfield 2012, "Masked object registration in the Fourier domain").
+//!
+//! For the simulation `a` (mask `m₁`) and the rotated scan `b` (mask `m₂`), every translation `d` at once:
+//!
+//! ```text
+//!   N = m₁ ⋆ m₂,  Sa = a m₁ ⋆ m₂,  Sb = m₁ ⋆ b m₂,  Saa = a² m₁ ⋆ m₂,  Sbb = m₁ ⋆ b² m₂,  Sab = a m₁ ⋆ b m₂
+//!   NCC(d) = (Sab − Sa·Sb/N) / √((Saa − Sa²/N)(Sbb − Sb²/N))
+//! ```
+//!
+//! where `(f ⋆ g)(d) = Σᵢ f(i) g(i + d)` is a correlation by FFT, zero-padded so that no translation wraps.
+//! The correlation is only taken where the overlap `N` holds at least [`MIN_OVERLAP`] of the smaller of the two
+//! areas: a few cells correlate by chance.
+
+use super::{Grid, Pose};
+use crate::base::fft2::RealFft2;
+use rustfft::num_complex::Complex64;
+
+/// Share of the smaller area (simulation or scan, in measured cells) a translation must overlap to count.
+pub const MIN_OVERLAP: f64 = 0.25;
+
+/// The best pose found at one level and its correlation.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct Found {
+    pub pose: Pose,
+    pub ncc: f64,
+}
+
+/// The simulation's side of the correlations, transformed once for every candidate angle.
+pub(super) struct Searcher<'a> {
+    sim: &'a Grid,
+    scan: &'a Grid,
+    fft: RealFft2,
+    /// `m₁`, `a m₁`, `a² m₁` spectra, conjugated.
+    spectra: [Vec<Complex64>; 3],
+    size: (usize, usize),
+    min_cells: f64,
+    /// The simulation's and the scan's centres, mm (of the full grids).
+    centres: ([f64; 2], [f64; 2]),
+}
+
+impl<'a> Searcher<'a> {
+    /// Both grids at one pitch (the coarse level).
+    pub fn new(sim: &'a Grid, scan: &'a Grid, centres: ([f64; 2], [f64; 2])) -> Self {
+        // the rotated scan's box is at most its diagonal on a side
+        let diag = ((scan.nx * scan.nx + scan.ny * scan.ny) as f64).sqrt().ceil() as usize + 2;
+        let size = (sim.nx + diag, sim.ny + diag);
+        let mut fft = RealFft2::new(size.0, size.1);
+        let [m, a, a2] = moments(sim);
+        let mut spec = |f: &[f64]| {
+            let mut s = fft.forward_spectrum(f, sim.nx, sim.ny);
+            s.iter_mut().for_each(|c| *c = c.conj());
+            s
+        };
+        let spectra = [spec(&m), spec(&a), spec(&a2)];
+        let min_cells = MIN_OVERLAP * (sim.valid_count().min(scan.valid_count()) as f64);
+        Self {
+            sim,
+            scan,
+            fft,
+            spectra,
+            size,
+            min_cells,
+            centres,
+        }
+    }
+
+    /// The best translation of the scan turned by `quarter_turns`·90° + `angle_deg`: the pose and its NCC.
+    pub fn best(&mut self, quarter_turns: u8, angle_deg: f64) -> Option<Found> {
+        let pose = Pose {
+            quarter_turns,
+            angle_deg,
+            shift_mm: [0.0; 2],
+            plane: [0.0; 3],
+        };
+        let (g, origin) = self.rotated(&pose);
+        let [m, b, b2] = moments(&g);
+        let (lx, ly) = self.size;
+        let mut corr = |input: &[f64], s: usize| {
+            let spec = &self.spectra[s];
+            let hy = ly;
+            let mut out = vec![0.0; lx * ly];
+            self.fft.filter(input, (g.nx, g.ny), &mut out, (lx, ly), |kx, col| {
+                for (ky, c) in col.iter_mut().enumerate() {
+                    *c *= spec[kx * hy + ky];
+                }
+            });
+            out
+        };
+        let n = corr(&m, 0);
+        let sa = corr(&m, 1);
+        let saa = corr(&m, 2);
+        let sb = corr(&b, 0);
+        let sbb = corr(&b2, 0);
+        let sab = corr(&b, 1);
+        let mut best: Option<(f64, usize)> = None;
+        for k in 0..lx * ly {
+            if n[k] < self.min_cells {
+                continue;
+            }
+            let nn = n[k];
+            let va = saa[k] - sa[k] * sa[k] / nn;
+            let vb = sbb[k] - sb[k] * sb[k] / nn;
+            if va <= 1e-30 || vb <= 1e-30 {
+                continue;
+            }
+            let r = (sab[k] - sa[k] * sb[k] / nn) / (va * vb).sqrt();
+            if best.is_none_or(|(v, _)| r > v) {
+                best = Some((r, k));
+            }
+        }
+        let (ncc, k) = best?;
+        // index k holds the translation d (mod the padded size) pairing sim cell i with rotated cell i + d
+        let wrap = |v: usize, l: usize| if v >= l / 2 { v as f64 - l as f64 } else { v as f64 };
+        let d = [wrap(k % lx, lx), wrap(k / lx, ly)];
+        let p = self.sim.pitch_mm;
+        let at = [origin[0] + d[0] * p, origin[1] + d[1] * p];
+        // the sim point x meets the rotated cell at x + at, the scan point R(φ)(x + at − c_sim) + c_scan
+        let (c, s) = (pose.phi().cos(), pose.phi().sin());
+        Some(Found {
+            pose: Pose {
+                shift_mm: [c * at[0] - s * at[1], s * at[0] + c * at[1]],
+                ..pose
+            },
+            ncc,
+        })
+    }
+
+    /// The scan turned into the simulation's frame, on a grid of the simulation's pitch covering it; returns
+    /// the grid and the sim-frame position (mm) of its corner.
+    fn rotated(&self, pose: &Pose) -> (Grid, [f64; 2]) {
+        let (sim, scan) = (self.sim, self.scan);
+        let p = sim.pitch_mm;
+        let (c, s) = (pose.phi().cos(), pose.phi().sin());
+        let (sc, cc) = self.centres;
+        // scan corners to the sim frame: x = R(−φ)(X − c_scan) + c_sim
+        let (w, h) = (scan.nx as f64 * scan.pitch_mm, scan.ny as f64 * scan.pitch_mm);
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for (x, y) in [(0.0, 0.0), (w, 0.0), (0.0, h), (w, h)] {
+            let (dx, dy) = (x - cc[0], y - cc[1]);
+            let q = [c * dx + s * dy + sc[0], -s * dx + c * dy + sc[1]];
+            for a in 0..2 {
+                lo[a] = lo[a].min(q[a]);
+                hi[a] = hi[a].max(q[a]);
+            }
+        }
+        let diag = ((scan.nx * scan.nx + scan.ny * scan.ny) as f64).sqrt().ceil() as usize + 2;
+        let nx = (((hi[0] - lo[0]) / p).ceil() as usize).clamp(1, diag);
+        let ny = (((hi[1] - lo[1]) / p).ceil() as usize).clamp(1, diag);
+        let mut g = Grid {
+            nx,
+            ny,
+            pitch_mm: p,
+            z: vec![0.0; nx * ny],
+            valid: vec![false; nx * ny],
+        };
+        for j in 0..ny {
+            for i in 0..nx {
+                let x = [lo[0] + (i as f64 + 0.5) * p, lo[1] + (j as f64 + 0.5) * p];
+                let (dx, dy) = (x[0] - sc[0], x[1] - sc[1]);
+                let q = [c * dx - s * dy + cc[0], s * dx + c * dy + cc[1]];
+                if let Some(v) = scan.sample(q[0], q[1]) {
+                    g.z[j * nx + i] = v;
+                    g.valid[j * nx + i] = true;
+                }
+            }
+        }
+        (g, lo)
+    }
+}
+
+/// The mask `m`, the heights less their mean `z m` and their squares `z² m`, zero where missing.
+fn moments(g: &Grid) -> [Vec<f64>; 3] {
+    let mean = g.mean();
+    let (mut m, mut a, mut a2) = (vec![0.0; g.z.len()], vec![0.0; g.z.len()], vec![0.0; g.z.len()]);
+    for (k, (z, ok)) in g.z.iter().zip(&g.valid).enumerate() {
+        if *ok {
+            let v = z - mean;
+            (m[k], a[k], a2[k]) = (1.0, v, v * v);
+        }
+    }
+    [m, a, a2]
+}
