@@ -225,6 +225,22 @@ fn a_scan_of_the_cut_registers_and_is_measured_as_the_verdict_measures_the_cut()
         );
     }
 
+    // a scan of a corner of the part, less than a tile: registered, but it cannot be measured as the verdict
+    // measures the cut, and is refused saying what it needs
+    let m = Make {
+        phi_deg: 0.0,
+        shift_mm: [1.5, 1.5],
+        side: part.1 / 2,
+        tilt_deg: 0.0,
+        noise_um: 0.0,
+    };
+    let corner = dir.path().join("corner.npy");
+    make_scan(&part, &m, &corner);
+    let (o, _) = compare(&corner, &job, &dir.path().join("corner-cmp"));
+    assert_eq!(o.status.code(), Some(1), "{}", String::from_utf8_lossy(&o.stdout));
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert!(err.contains("no whole 6 × 6 mm tile"), "{err}");
+
     // another job's cut: it does not register, is not measured, and the comparison says so and exits 3
     let (o, c) = compare(&other.join("sim.x3p"), &job, &dir.path().join("other-cmp"));
     assert_eq!(o.status.code(), Some(3), "{}", String::from_utf8_lossy(&o.stderr));

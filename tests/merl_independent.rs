@@ -288,11 +288,11 @@ fn phi_d_and_its_mirror_are_told_apart() {
     }
 }
 
-/// `brdfmill export` on a job's output folder: `milled.binary` and `target.binary`, read here by the
+/// `brdfmill export` on a job's output folder: `target.binary`, `design.binary` and `milled.binary`, read here by the
 /// published layout (three `int32` dimensions, then each channel's `float64` block, θh slowest and φd fastest,
 /// times MERL's scales 1/1500, 1.15/1500, 1.66/1500) without brdfmill's reader, hold at every bin centre
-/// tested the BRDFs the report shows: the target, and the microfacet BRDF of the NDF the verdict measured
-/// (`ndf-milled.json`) with the target's material. Directions are this file's (MERL's construction).
+/// tested the BRDFs the report shows: the target, and the microfacet BRDFs of the NDFs the verdict measured
+/// (`ndf-design.json`, `ndf-milled.json`) with the target's material. Directions are this file's (MERL's construction).
 #[test]
 #[ignore = "slow: runs a job (about 10 s) and writes three 33 MB tables"]
 fn export_writes_the_target_and_milled_brdfs_in_merls_layout() {
@@ -326,16 +326,19 @@ fn export_writes_the_target_and_milled_brdfs_in_merls_layout() {
     ]);
     brdfmill(&["export", job_s]);
     let target = Brdf::parse(spec).unwrap();
-    let milled = MicrofacetBrdf::new(
-        NdfFile::read(&job.join("ndf-milled.json")).unwrap().target(),
-        target.material,
-    );
+    let surface = |name: &str| MicrofacetBrdf::new(NdfFile::read(&job.join(name)).unwrap().target(), target.material);
+    let (design, milled) = (surface("ndf-design.json"), surface("ndf-milled.json"));
     let scale = [1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0];
     let n = NH * ND * NP;
     type Brdf3<'a> = &'a dyn Fn(&Vec3, &Vec3) -> [f64; 3];
     let target_f = |a: &Vec3, b: &Vec3| target.eval(a, b);
+    let design_f = |a: &Vec3, b: &Vec3| design.eval(a, b);
     let milled_f = |a: &Vec3, b: &Vec3| milled.eval(a, b);
-    let files: [(&str, Brdf3); 2] = [("target.binary", &target_f), ("milled.binary", &milled_f)];
+    let files: [(&str, Brdf3); 3] = [
+        ("target.binary", &target_f),
+        ("design.binary", &design_f),
+        ("milled.binary", &milled_f),
+    ];
     for (file, f) in files {
         let bytes = std::fs::read(job.join(file)).unwrap();
         let int = |k: usize| i32::from_le_bytes(bytes[4 * k..4 * k + 4].try_into().unwrap());

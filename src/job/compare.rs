@@ -8,9 +8,10 @@
 //! it covers in the part's interior. The simulated cut is measured in the same window beside it, so the
 //! two columns differ only by what the part differs from the simulation.
 //!
-//! The scan passes when it registers (its correlation with the simulated cut at least
+//! The scan passes when it registers (its slopes agree with the simulated cut's to at least
 //! [`CompareConfig::min_correlation`]: a scan of another part does not) and its figures meet the job's
-//! tolerances. Written into the output folder: `compare.json`, `compare.html`, `difference.png` (scan − simulation)
+//! tolerances. A drawn highlight's target is refused (the verdict judges it by the image, which needs the
+//! design). Written into the output folder: `compare.json`, `compare.html`, `difference.png` (scan − simulation)
 //! and `ndf-scan.json` (the scan's NDF, `ndf.json`'s format).
 
 use super::runner::JOB_AS_RUN;
@@ -75,7 +76,7 @@ pub struct RegistrationFigures {
     pub coverage: f64,
     /// RMS of the registered scan less the simulated cut over the overlap, µm.
     pub residual_rms_um: f64,
-    /// The correlation reaches `min_correlation`.
+    /// The slopes' agreement reaches `min_correlation`.
     pub registered: bool,
 }
 
@@ -121,6 +122,12 @@ pub fn compare(scan_path: &Path, job_out: &Path, out: &Path, cfg: &CompareConfig
     if ready.labels.is_some() {
         return Err(input(
             "the job has `[svbrdf]` regions: compare measures a job with one target".into(),
+        ));
+    }
+    if ready.target().highlight().is_some() {
+        // the verdict judges a drawn highlight by the image's correlation, which needs the design's NDF
+        return Err(input(
+            "the job's target is a drawn highlight: compare measures a target given as a BRDF or a surface (the highlight's check is not made for a scan yet)".into(),
         ));
     }
     let job = &ready.job;
@@ -205,7 +212,10 @@ pub fn compare(scan_path: &Path, job_out: &Path, out: &Path, cfg: &CompareConfig
     }
     let verdicts = gauge.window(vcfg, &sim.hf).map_err(|e| input(e.to_string()))?;
     let margin = gauge.margin(sim.hf.pitch_mm);
-    let reach = reach_cells(sim.hf.pitch_mm, stepover);
+    // measured cells the slopes reach beyond the window, and the pre-filter's ±3σ (it runs over the whole
+    // grid, where a missing point holds no height)
+    let reach =
+        reach_cells(sim.hf.pitch_mm, stepover) + (3.0 * vcfg.prefilter_um * 1e-3 / sim.hf.pitch_mm).ceil() as usize;
     let (window, own) = if covered(&reg.scan, &verdicts, reach) {
         (verdicts, true)
     } else {
@@ -350,7 +360,9 @@ fn largest_window(g: &Grid, margin: usize, reach: usize, tile_mm: [f64; 2]) -> O
     for (kx, ky) in sizes {
         let nx = ((kx as f64 * tile_mm[0] / p).round() as usize).min(inner[0]);
         let ny = ((ky as f64 * tile_mm[1] / p).round() as usize).min(inner[1]);
-        let step = 4;
+        // every position while there are at most a million of them, else every fourth (each test is O(1))
+        let positions = (inner[0] - nx + 1) * (inner[1] - ny + 1);
+        let step = if positions <= 1_000_000 { 1 } else { 4 };
         let mut j0 = margin;
         while j0 + ny <= margin + inner[1] {
             let mut i0 = margin;

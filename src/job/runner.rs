@@ -29,7 +29,7 @@ const DEFAULT_POLISH_ALPHA: f64 = 0.06;
 pub fn run(ready: &Ready, out: &Path, until: Stage, progress: &mut dyn FnMut(Progress)) -> Result<Outcome, JobError> {
     let mut o = Out::new(out, &ready.job.name, &ready.dir)?;
     // the job as it runs (overrides applied, budgets derived): what `brdfmill compare` measures a scan with
-    o.write(JOB_AS_RUN, ready.job.to_toml().map_err(stage_err("ndf"))?.as_bytes())?;
+    o.write(JOB_AS_RUN, ready.job.to_toml().map_err(stage_err("run"))?.as_bytes())?;
     let mut outcome = empty_outcome(ready);
     let targets = prepare_targets(ready, &mut o, progress)?;
 

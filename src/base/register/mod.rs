@@ -12,8 +12,10 @@
 //! `C` the scan's heights read bilinearly between its points. Found in three steps:
 //!
 //! 1. **Coarse** (`search.rs`): both box-averaged to at most [`COARSE_CELLS`] cells along the longer side, the
-//!    scan levelled; for each quarter turn `k` and each `θ` in ±[`MAX_ANGLE_DEG`] in 1° steps, then in ¼°
-//!    steps about the best, the translation of greatest masked normalised cross-correlation.
+//!    scan levelled; for each quarter turn `k` and each `θ` in ±[`MAX_ANGLE_DEG`] in 1° steps, the
+//!    translation of greatest masked normalised cross-correlation of their slopes. The best few distinct peaks are each
+//!    refined (step 2) on the two coarsest levels, and the one that leaves the least rms height difference
+//!    there goes on: a scan of part of the part can correlate best, coarsely, at a wrong pose.
 //! 2. **Fine**: Gauss–Newton on `Σ (W − S)²` over `(θ, t, p)`, level by level of a pyramid (each level half
 //!    the cell of the last) down to the simulation's own pitch (Lucas & Kanade 1981).
 //! 3. **Result**: the scan (not levelled this time) read onto the simulation's grid, the plane of
@@ -35,6 +37,11 @@ pub const COARSE_CELLS: usize = 160;
 pub const MAX_ANGLE_DEG: f64 = 5.0;
 /// Gauss–Newton iterations at each level of the pyramid, at most.
 const ITERATIONS: usize = 12;
+/// The scan may be at most this many times the simulated cut's extent along each axis (beyond it the coarse
+/// level would leave the cut a few cells).
+pub const MAX_EXTENT_RATIO: f64 = 2.0;
+/// Coarse peaks refined and judged by what they leave.
+const CANDIDATES: usize = 6;
 
 /// A grid of heights with its missing points: cell `(i, j)` at `((i + ½)·pitch, (j + ½)·pitch)` mm.
 #[derive(Clone, Debug, PartialEq)]
@@ -268,6 +275,14 @@ pub enum RegisterError {
         /// Its measured points.
         points: usize,
     },
+    /// The scan is far larger than the simulated cut.
+    #[error("the scan is {:.1} × {:.1} mm, more than {MAX_EXTENT_RATIO} times the simulated cut's {:.1} × {:.1} mm along an axis: crop it to the part", scan_mm[0], scan_mm[1], sim_mm[0], sim_mm[1])]
+    TooLarge {
+        /// The scan's extent, mm.
+        scan_mm: [f64; 2],
+        /// The simulated cut's, mm.
+        sim_mm: [f64; 2],
+    },
     /// No pose overlaps enough.
     #[error("no rotation or translation lays the scan over a quarter of the simulated cut (or the cut over a quarter of the scan)")]
     NoOverlap,
@@ -285,11 +300,26 @@ pub fn register(sim: &Grid, scan: &Grid, slope_step_mm: f64) -> Result<Registere
         }
     }
     let p = sim.pitch_mm;
+    // the scan read onto the simulation's pitch: its size bounded before it is made, and checked again
+    let extent = [scan.nx as f64 * scan.pitch_mm, scan.ny as f64 * scan.pitch_mm];
+    let sim_extent = [sim.nx as f64 * p, sim.ny as f64 * p];
+    if (0..2).any(|a| extent[a] > MAX_EXTENT_RATIO * sim_extent[a]) {
+        return Err(RegisterError::TooLarge {
+            scan_mm: extent,
+            sim_mm: sim_extent,
+        });
+    }
     let raw = if (scan.pitch_mm / p - 1.0).abs() > 1e-3 {
         scan.at_pitch(p)
     } else {
         scan.clone()
     };
+    if raw.valid_count() < 256 || raw.nx < 16 || raw.ny < 16 {
+        return Err(RegisterError::TooSmall {
+            what: "scan read at the simulated cut's pitch",
+            points: raw.valid_count(),
+        });
+    }
     let level = raw.levelled();
     let longest = sim.nx.max(sim.ny).max(level.nx).max(level.ny);
     let top = longest.div_ceil(COARSE_CELLS).next_power_of_two();
@@ -298,26 +328,45 @@ pub fn register(sim: &Grid, scan: &Grid, slope_step_mm: f64) -> Result<Registere
     let centres = (sim.centre(), raw.centre());
     let mut searcher = search::Searcher::new(&sim_c, &scan_c, centres);
     let steps = (2.0 * MAX_ANGLE_DEG) as i32;
-    let mut best: Option<search::Found> = None;
-    let consider = |f: Option<search::Found>, best: &mut Option<search::Found>| {
-        if let Some(f) = f.filter(|f| best.is_none_or(|b| f.ncc > b.ncc)) {
-            *best = Some(f);
+    let mut found: Vec<search::Found> = (0..4u8)
+        .flat_map(|k| (0..=steps).map(move |a| (k, -MAX_ANGLE_DEG + a as f64)))
+        .filter_map(|(k, angle)| searcher.best(k, angle))
+        .collect();
+    found.sort_by(|a, b| b.ncc.total_cmp(&a.ncc));
+    // the best few distinct peaks, each refined on the two coarsest levels and judged by the rms height
+    // difference left there: a scan of part of the part can correlate best, coarsely, at a wrong pose (the
+    // relief's long waves), which its detail then refutes
+    let mut picks: Vec<search::Found> = vec![];
+    for f in found {
+        if picks.len() == CANDIDATES {
+            break;
         }
-    };
-    for k in 0..4u8 {
-        for a in 0..=steps {
-            let angle = -MAX_ANGLE_DEG + a as f64;
-            consider(searcher.best(k, angle), &mut best);
+        if picks.iter().all(|p| distinct(&p.pose, &f.pose, sim_c.pitch_mm)) {
+            picks.push(f);
         }
     }
-    let first = best.ok_or(RegisterError::NoOverlap)?;
-    for d in [-0.75, -0.5, -0.25, 0.25, 0.5, 0.75] {
-        let f = searcher.best(first.pose.quarter_turns, first.pose.angle_deg + d);
-        consider(f, &mut best);
+    if picks.is_empty() {
+        return Err(RegisterError::NoOverlap);
     }
-    let coarse = best.ok_or(RegisterError::NoOverlap)?;
-    let mut pose = coarse.pose;
-    let mut f = top;
+    let min_cells = search::MIN_OVERLAP * sim.valid_count().min(level.valid_count()) as f64;
+    let half = (top / 2).max(1);
+    let (sim_h, scan_h) = (sim.coarsen(half), level.coarsen(half));
+    let judged: Vec<(Pose, f64, f64)> = picks
+        .iter()
+        .map(|f| {
+            let p = refine(&sim_c, &scan_c, centres, f.pose, ITERATIONS);
+            let p = refine(&sim_h, &scan_h, centres, p, ITERATIONS);
+            let (rms, cells) = rms_left(&sim_h, &scan_h, centres, &p);
+            let enough = cells as f64 * (half * half) as f64 >= min_cells;
+            (p, if enough { rms } else { f64::INFINITY }, f.ncc)
+        })
+        .collect();
+    let (mut pose, _, ncc) = judged
+        .iter()
+        .copied()
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .ok_or(RegisterError::NoOverlap)?;
+    let mut f = (half / 2).max(1);
     loop {
         let (s, c) = if f > 1 {
             (sim.coarsen(f), level.coarsen(f))
@@ -330,7 +379,35 @@ pub fn register(sim: &Grid, scan: &Grid, slope_step_mm: f64) -> Result<Registere
         }
         f /= 2;
     }
+    let coarse = search::Found { pose, ncc };
     Ok(finish(sim, &raw, pose, coarse.ncc, slope_step_mm))
+}
+
+/// Two coarse poses that are not the same peak: another quarter turn, more than 1.5° apart, or more than two
+/// coarse cells apart.
+fn distinct(a: &Pose, b: &Pose, cell_mm: f64) -> bool {
+    a.quarter_turns != b.quarter_turns
+        || (a.angle_deg - b.angle_deg).abs() > 1.5
+        || (a.shift_mm[0] - b.shift_mm[0]).hypot(a.shift_mm[1] - b.shift_mm[1]) > 2.0 * cell_mm
+}
+
+/// The rms of `C(X) − plane − S` over the overlap at `pose`, mm, and the cells it covers.
+fn rms_left(sim: &Grid, scan: &Grid, (cs, cc): ([f64; 2], [f64; 2]), pose: &Pose) -> (f64, usize) {
+    let h = sim.pitch_mm;
+    let phi = pose.phi();
+    let rot = (phi.cos(), phi.sin());
+    let (mut s, mut n) = (0.0, 0usize);
+    for k in 0..sim.z.len() {
+        let x = [((k % sim.nx) as f64 + 0.5) * h, ((k / sim.nx) as f64 + 0.5) * h];
+        let q = map(pose, cs, cc, rot, x);
+        if let (true, Some(v)) = (sim.valid[k], scan.sample(q[0], q[1])) {
+            let (dx, dy) = (x[0] - cs[0], x[1] - cs[1]);
+            let r = v - (pose.plane[0] + pose.plane[1] * dx + pose.plane[2] * dy) - sim.z[k];
+            s += r * r;
+            n += 1;
+        }
+    }
+    ((s / n.max(1) as f64).sqrt(), n)
 }
 
 /// The scan point of simulation point `x`.

@@ -1,11 +1,16 @@
 //! The coarse search: every quarter turn and small angle, each with the translation that maximises the
-//! masked normalised cross-correlation (Padfield 2012, "Masked object registration in the Fourier domain").
+//! masked normalised cross-correlation (Padfield 2012, "Masked object registration in the Fourier domain")
+//! of the two surfaces' *slopes*: the differences along x and along y are two channels of one signal. Slopes
+//! are what tells one design from another (each facet its own), and a plane (the scan's tilt) only adds a
+//! constant to them, which the correlation removes; heights are dominated by the relief's long waves, which
+//! a scan of part of the part shares with many wrong poses.
 //!
-//! For the simulation `a` (mask `m₁`) and the rotated scan `b` (mask `m₂`), every translation `d` at once:
+//! For the simulation's channel `a` (mask `m₁`) and the rotated scan's `b` (mask `m₂`), every translation
+//! `d` at once, each sum over both channels:
 //!
 //! ```text
 //!   N = m₁ ⋆ m₂,  Sa = a m₁ ⋆ m₂,  Sb = m₁ ⋆ b m₂,  Saa = a² m₁ ⋆ m₂,  Sbb = m₁ ⋆ b² m₂,  Sab = a m₁ ⋆ b m₂
-//!   NCC(d) = (Sab − Sa·Sb/N) / √((Saa − Sa²/N)(Sbb − Sb²/N))
+//!   NCC(d) = Σ (Sab − Sa·Sb/N) / √(Σ (Saa − Sa²/N) · Σ (Sbb − Sb²/N))
 //! ```
 //!
 //! where `(f ⋆ g)(d) = Σᵢ f(i) g(i + d)` is a correlation by FFT, zero-padded so that no translation wraps.
@@ -31,8 +36,8 @@ pub(super) struct Searcher<'a> {
     sim: &'a Grid,
     scan: &'a Grid,
     fft: RealFft2,
-    /// `m₁`, `a m₁`, `a² m₁` spectra, conjugated.
-    spectra: [Vec<Complex64>; 3],
+    /// `m₁`, `a m₁`, `a² m₁` spectra of each slope channel, conjugated.
+    spectra: [[Vec<Complex64>; 3]; 2],
     size: (usize, usize),
     min_cells: f64,
     /// The simulation's and the scan's centres, mm (of the full grids).
@@ -46,14 +51,13 @@ impl<'a> Searcher<'a> {
         let diag = ((scan.nx * scan.nx + scan.ny * scan.ny) as f64).sqrt().ceil() as usize + 2;
         let size = (sim.nx + diag, sim.ny + diag);
         let mut fft = RealFft2::new(size.0, size.1);
-        let [m, a, a2] = moments(sim);
         let mut spec = |f: &[f64]| {
             let mut s = fft.forward_spectrum(f, sim.nx, sim.ny);
             s.iter_mut().for_each(|c| *c = c.conj());
             s
         };
-        let spectra = [spec(&m), spec(&a), spec(&a2)];
-        let min_cells = MIN_OVERLAP * (sim.valid_count().min(scan.valid_count()) as f64);
+        let spectra = slopes(sim).map(|ch| moments(&ch).map(|f| spec(&f)));
+        let min_cells = (MIN_OVERLAP * (sim.valid_count().min(scan.valid_count()) as f64)).max(16.0);
         Self {
             sim,
             scan,
@@ -74,45 +78,51 @@ impl<'a> Searcher<'a> {
             plane: [0.0; 3],
         };
         let (g, origin) = self.rotated(&pose);
-        let [m, b, b2] = moments(&g);
         let (lx, ly) = self.size;
-        let mut corr = |input: &[f64], s: usize| {
-            let spec = &self.spectra[s];
-            let hy = ly;
-            let mut out = vec![0.0; lx * ly];
-            self.fft.filter(input, (g.nx, g.ny), &mut out, (lx, ly), |kx, col| {
-                for (ky, c) in col.iter_mut().enumerate() {
-                    *c *= spec[kx * hy + ky];
-                }
-            });
-            out
-        };
-        let n = corr(&m, 0);
-        let sa = corr(&m, 1);
-        let saa = corr(&m, 2);
-        let sb = corr(&b, 0);
-        let sbb = corr(&b2, 0);
-        let sab = corr(&b, 1);
+        let zeros = || vec![0.0; lx * ly];
+        let (mut num, mut den_a, mut den_b, mut n) = (zeros(), zeros(), zeros(), zeros());
+        for (c, ch) in slopes(&g).iter().enumerate() {
+            let [m, b, b2] = moments(ch);
+            let mut corr = |input: &[f64], s: usize| {
+                let spec = &self.spectra[c][s];
+                let mut out = zeros();
+                self.fft.filter(input, (g.nx, g.ny), &mut out, (lx, ly), |kx, col| {
+                    for (ky, v) in col.iter_mut().enumerate() {
+                        *v *= spec[kx * ly + ky];
+                    }
+                });
+                out
+            };
+            let (nc, sa, saa) = (corr(&m, 0), corr(&m, 1), corr(&m, 2));
+            let (sb, sbb, sab) = (corr(&b, 0), corr(&b2, 0), corr(&b, 1));
+            for k in 0..lx * ly {
+                let nn = nc[k].max(1e-9);
+                num[k] += sab[k] - sa[k] * sb[k] / nn;
+                den_a[k] += saa[k] - sa[k] * sa[k] / nn;
+                den_b[k] += sbb[k] - sb[k] * sb[k] / nn;
+                n[k] += 0.5 * nc[k];
+            }
+        }
         let mut best: Option<(f64, usize)> = None;
         for k in 0..lx * ly {
             if n[k] < self.min_cells {
                 continue;
             }
-            let nn = n[k];
-            let va = saa[k] - sa[k] * sa[k] / nn;
-            let vb = sbb[k] - sb[k] * sb[k] / nn;
-            if va <= 1e-30 || vb <= 1e-30 {
+            // (`min_cells` is at least 16: a handful of cells correlates by chance)
+            let (va, vb) = (den_a[k], den_b[k]);
+            if !(va > 1e-30 && vb > 1e-30) {
                 continue;
             }
-            let r = (sab[k] - sa[k] * sb[k] / nn) / (va * vb).sqrt();
+            let r = num[k] / (va * vb).sqrt();
             if best.is_none_or(|(v, _)| r > v) {
                 best = Some((r, k));
             }
         }
         let (ncc, k) = best?;
-        // index k holds the translation d (mod the padded size) pairing sim cell i with rotated cell i + d
-        let wrap = |v: usize, l: usize| if v >= l / 2 { v as f64 - l as f64 } else { v as f64 };
-        let d = [wrap(k % lx, lx), wrap(k / lx, ly)];
+        // index k holds the translation d (mod the padded size) pairing sim cell i with rotated cell i + d;
+        // d runs over [−(n_sim − 1), n_rot − 1], which the padded size holds without overlap
+        let wrap = |v: usize, n_rot: usize, l: usize| if v < n_rot { v as f64 } else { v as f64 - l as f64 };
+        let d = [wrap(k % lx, g.nx, lx), wrap(k / lx, g.ny, ly)];
         let p = self.sim.pitch_mm;
         let at = [origin[0] + d[0] * p, origin[1] + d[1] * p];
         // the sim point x meets the rotated cell at x + at, the scan point R(φ)(x + at − c_sim) + c_scan
@@ -180,4 +190,26 @@ fn moments(g: &Grid) -> [Vec<f64>; 3] {
         }
     }
     [m, a, a2]
+}
+
+/// The central differences along x and along y (heights per cell), measured where both neighbours are.
+fn slopes(g: &Grid) -> [Grid; 2] {
+    let mut out = [g.clone(), g.clone()];
+    for (c, step) in [1, g.nx].into_iter().enumerate() {
+        let o = &mut out[c];
+        for j in 0..g.ny {
+            for i in 0..g.nx {
+                let k = j * g.nx + i;
+                let inside = if c == 0 {
+                    i >= 1 && i + 1 < g.nx
+                } else {
+                    j >= 1 && j + 1 < g.ny
+                };
+                let ok = inside && g.valid[k - step] && g.valid[k + step];
+                o.valid[k] = ok;
+                o.z[k] = if ok { 0.5 * (g.z[k + step] - g.z[k - step]) } else { 0.0 };
+            }
+        }
+    }
+    out
 }

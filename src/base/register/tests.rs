@@ -124,6 +124,39 @@ fn a_turned_shifted_tilted_noisy_scan_registers_to_the_pose_that_made_it() {
 }
 
 #[test]
+fn a_scan_of_a_far_corner_of_the_part_registers() {
+    // a quarter of the part's side, off centre by more than half the part: the translation at the
+    // correlation's peak is far from zero and negative
+    let sim = sim();
+    for (phi, corner) in [(0.0, [2.55, 2.55]), (-90.0, [0.45, 2.55]), (2.0, [2.55, 0.45])] {
+        // the scan's centre sees the part's point `corner`: t = −R(φ)(corner − c_sim), c_sim = 1.5
+        let (c, s) = (f64::to_radians(phi).cos(), f64::to_radians(phi).sin());
+        let v = [corner[0] - 1.5, corner[1] - 1.5];
+        let t = [-(c * v[0] - s * v[1]), -(s * v[0] + c * v[1])];
+        let sc = scan(80, 0.01, phi, t, [0.0, 0.0], 0.0);
+        let r = register(&sim, &sc, 0.02).expect("registers");
+        let err_phi = (r.pose.rotation_deg() - phi + 540.0).rem_euclid(360.0) - 180.0;
+        assert!(err_phi.abs() < 0.05, "rotation {} for {phi}", r.pose.rotation_deg());
+        assert!(
+            r.residual_rms_um < 0.5,
+            "residual {} µm at {phi}°, {t:?}",
+            r.residual_rms_um
+        );
+        assert!(r.slope_correlation > 0.99, "slopes agree {}", r.slope_correlation);
+    }
+}
+
+#[test]
+fn a_scan_far_larger_than_the_part_is_refused() {
+    let sim = sim();
+    let big = grid(700, 700, 0.01, |x, y| Some(surface(x, y)));
+    assert!(matches!(
+        register(&sim, &big, 0.02),
+        Err(RegisterError::TooLarge { .. })
+    ));
+}
+
+#[test]
 fn a_scan_at_another_pitch_is_read_onto_the_simulations() {
     let sim = sim();
     let sc = scan(260, 0.015, 2.0, [0.05, 0.1], [0.0, 0.0], 0.0);

@@ -146,3 +146,57 @@ fn a_non_finite_increment_names_its_field() {
     let e = read(&p).unwrap_err().to_string();
     assert!(e.contains("CZ/Increment") && e.contains("n.x3p"), "{e}");
 }
+
+/// The fill as it was first written: every missing point visited each round. The frontier version must give
+/// the same heights, bit for bit, on a wide missing border and scattered holes.
+#[test]
+fn the_frontier_fill_gives_the_first_fills_values() {
+    let (nx, ny) = (61, 47);
+    let mut state = 9u64;
+    let mut u = || {
+        state = state
+            .wrapping_mul(6364136223846793005)
+            .wrapping_add(1442695040888963407);
+        (state >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let z: Vec<f64> = (0..nx * ny).map(|_| u()).collect();
+    // measured: an off-centre block, with holes
+    let valid: Vec<bool> = (0..nx * ny)
+        .map(|k| {
+            let (i, j) = (k % nx, k / nx);
+            (8..30).contains(&i) && (20..40).contains(&j) && u() > 0.2
+        })
+        .collect();
+    let s = X3p::from_grid(nx, ny, 0.001, z.clone(), valid.clone());
+    let got = s.heightfield().unwrap().z_mm;
+    let (mut want, mut known) = (z, valid);
+    let mut todo: Vec<usize> = (0..nx * ny).filter(|k| !known[*k]).collect();
+    while !todo.is_empty() {
+        let mut fills = Vec::new();
+        for &k in &todo {
+            let (i, j) = ((k % nx) as isize, (k / nx) as isize);
+            let (mut s, mut n) = (0.0, 0);
+            for dj in -1..=1 {
+                for di in -1..=1 {
+                    let (a, b) = (i + di, j + dj);
+                    if (di, dj) != (0, 0) && a >= 0 && b >= 0 && a < nx as isize && b < ny as isize {
+                        let q = b as usize * nx + a as usize;
+                        if known[q] {
+                            s += want[q];
+                            n += 1;
+                        }
+                    }
+                }
+            }
+            if n > 0 {
+                fills.push((k, s / n as f64));
+            }
+        }
+        for (k, v) in &fills {
+            want[*k] = *v;
+            known[*k] = true;
+        }
+        todo.retain(|k| !known[*k]);
+    }
+    assert_eq!(got, want);
+}
