@@ -214,8 +214,8 @@ pub fn compare(scan_path: &Path, job_out: &Path, out: &Path, cfg: &CompareConfig
     let margin = gauge.margin(sim.hf.pitch_mm);
     // measured cells the slopes reach beyond the window, and the pre-filter's ±3σ (it runs over the whole
     // grid, where a missing point holds no height)
-    let reach =
-        reach_cells(sim.hf.pitch_mm, stepover) + (3.0 * vcfg.prefilter_um * 1e-3 / sim.hf.pitch_mm).ceil() as usize;
+    let reach = reach_cells(sim.hf.pitch_mm, stepover)
+        .saturating_add((3.0 * vcfg.prefilter_um * 1e-3 / sim.hf.pitch_mm).ceil() as usize);
     let (window, own) = if covered(&reg.scan, &verdicts, reach) {
         (verdicts, true)
     } else {
@@ -327,7 +327,10 @@ fn covered(g: &Grid, win: &Window, reach: usize) -> bool {
     let (Some(i0), Some(j0)) = (i0, j0) else {
         return false;
     };
-    let (i1, j1) = (win.i0 + win.nx + reach, win.j0 + win.ny + reach);
+    let (i1, j1) = (
+        (win.i0 + win.nx).saturating_add(reach),
+        (win.j0 + win.ny).saturating_add(reach),
+    );
     if i1 > g.nx || j1 > g.ny {
         return false;
     }
@@ -368,7 +371,10 @@ fn largest_window(g: &Grid, margin: usize, reach: usize, tile_mm: [f64; 2]) -> O
             let mut i0 = margin;
             while i0 + nx <= margin + inner[0] {
                 let (a, b) = (i0.saturating_sub(reach), j0.saturating_sub(reach));
-                let (c, d) = ((i0 + nx + reach).min(g.nx), (j0 + ny + reach).min(g.ny));
+                let (c, d) = (
+                    (i0 + nx).saturating_add(reach).min(g.nx),
+                    (j0 + ny).saturating_add(reach).min(g.ny),
+                );
                 if missing(a, b, c, d) == 0 {
                     return Some(Window {
                         i0,

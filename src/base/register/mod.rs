@@ -309,6 +309,12 @@ pub fn register(sim: &Grid, scan: &Grid, slope_step_mm: f64) -> Result<Registere
             sim_mm: sim_extent,
         });
     }
+    if (0..2).any(|a| extent[a] < 16.0 * p) {
+        return Err(RegisterError::TooSmall {
+            what: "scan (less than 16 of the simulated cut's cells across)",
+            points: scan.valid_count(),
+        });
+    }
     let raw = if (scan.pitch_mm / p - 1.0).abs() > 1e-3 {
         scan.at_pitch(p)
     } else {
@@ -326,6 +332,12 @@ pub fn register(sim: &Grid, scan: &Grid, slope_step_mm: f64) -> Result<Registere
     let (sim_c, scan_c) = (sim.coarsen(top), level.coarsen(top));
     // every level maps about the full grids' centres (a coarse grid may be a cell short of the full one)
     let centres = (sim.centre(), raw.centre());
+    if scan_c.valid_count() < 16 {
+        return Err(RegisterError::TooSmall {
+            what: "scan at the coarse search's level (its cells are the simulated cut's coarsest)",
+            points: scan_c.valid_count(),
+        });
+    }
     let mut searcher = search::Searcher::new(&sim_c, &scan_c, centres);
     let steps = (2.0 * MAX_ANGLE_DEG) as i32;
     let mut found: Vec<search::Found> = (0..4u8)
@@ -364,6 +376,7 @@ pub fn register(sim: &Grid, scan: &Grid, slope_step_mm: f64) -> Result<Registere
     let (mut pose, _, ncc) = judged
         .iter()
         .copied()
+        .filter(|j| j.1.is_finite())
         .min_by(|a, b| a.1.total_cmp(&b.1))
         .ok_or(RegisterError::NoOverlap)?;
     let mut f = (half / 2).max(1);
@@ -383,11 +396,11 @@ pub fn register(sim: &Grid, scan: &Grid, slope_step_mm: f64) -> Result<Registere
     Ok(finish(sim, &raw, pose, coarse.ncc, slope_step_mm))
 }
 
-/// Two coarse poses that are not the same peak: another quarter turn, more than 1.5° apart, or more than two
-/// coarse cells apart.
+/// Two coarse poses that are not the same peak: another quarter turn, more than 2.5° apart (a peak is seen
+/// from the angles either side of it too), or more than two coarse cells apart.
 fn distinct(a: &Pose, b: &Pose, cell_mm: f64) -> bool {
     a.quarter_turns != b.quarter_turns
-        || (a.angle_deg - b.angle_deg).abs() > 1.5
+        || (a.angle_deg - b.angle_deg).abs() > 2.5
         || (a.shift_mm[0] - b.shift_mm[0]).hypot(a.shift_mm[1] - b.shift_mm[1]) > 2.0 * cell_mm
 }
 

@@ -40,6 +40,9 @@ pub(super) struct Searcher<'a> {
     spectra: [[Vec<Complex64>; 3]; 2],
     size: (usize, usize),
     min_cells: f64,
+    /// Mean square slope (about its mean) per cell and channel, of the simulation and of the scan: an
+    /// overlap whose slope variance is a thousandth of it is flat, and its correlation a ratio of rounding.
+    power: [f64; 2],
     /// The simulation's and the scan's centres, mm (of the full grids).
     centres: ([f64; 2], [f64; 2]),
 }
@@ -56,8 +59,18 @@ impl<'a> Searcher<'a> {
             s.iter_mut().for_each(|c| *c = c.conj());
             s
         };
-        let spectra = slopes(sim).map(|ch| moments(&ch).map(|f| spec(&f)));
-        let min_cells = (MIN_OVERLAP * (sim.valid_count().min(scan.valid_count()) as f64)).max(16.0);
+        let sim_slopes = slopes(sim);
+        let spectra = sim_slopes.clone().map(|ch| moments(&ch).map(|f| spec(&f)));
+        let scan_slopes = slopes(scan);
+        // (cells, power) over both channels
+        let stats = |chs: &[Grid; 2]| {
+            let cells = 0.5 * chs.iter().map(|c| c.valid_count() as f64).sum::<f64>();
+            let sq: f64 = chs.iter().map(|c| moments(c)[2].iter().sum::<f64>()).sum();
+            (cells, sq / (2.0 * cells).max(1.0))
+        };
+        let ((sim_cells, sim_power), (scan_cells, scan_power)) = (stats(&sim_slopes), stats(&scan_slopes));
+        // overlaps counted in cells with a slope, as `n` counts them
+        let min_cells = (MIN_OVERLAP * sim_cells.min(scan_cells)).max(16.0);
         Self {
             sim,
             scan,
@@ -65,6 +78,7 @@ impl<'a> Searcher<'a> {
             spectra,
             size,
             min_cells,
+            power: [sim_power, scan_power],
             centres,
         }
     }
@@ -110,10 +124,15 @@ impl<'a> Searcher<'a> {
             }
             // (`min_cells` is at least 16: a handful of cells correlates by chance)
             let (va, vb) = (den_a[k], den_b[k]);
-            if !(va > 1e-30 && vb > 1e-30) {
+            let flat = 2e-3 * n[k];
+            if !(va > flat * self.power[0] && vb > flat * self.power[1]) {
                 continue;
             }
             let r = num[k] / (va * vb).sqrt();
+            // beyond 1 (or NaN) is rounding over a near-flat overlap, not a match
+            if r.is_nan() || r > 1.0 + 1e-6 {
+                continue;
+            }
             if best.is_none_or(|(v, _)| r > v) {
                 best = Some((r, k));
             }

@@ -191,3 +191,32 @@ fn a_scan_of_a_few_points_is_refused() {
         Err(RegisterError::TooSmall { .. })
     ));
 }
+
+#[test]
+fn a_part_in_flat_stock_registers_in_a_frame_of_flat_stock() {
+    // the cut in the middle of a flat top, scanned with more flat top around it and a tilt: flat against flat
+    // correlates as rounding, which must not win
+    let part = |x: f64, y: f64| {
+        if (0.75..2.25).contains(&x) && (0.75..2.25).contains(&y) {
+            surface(x, y)
+        } else {
+            0.0
+        }
+    };
+    let sim = grid(300, 300, 0.01, |x, y| Some(part(x, y)));
+    let (t, tilt) = ([0.6, -0.4], 0.3f64.to_radians().tan());
+    // X = x − c_sim + c_scan + t, c_sim = 1.5, c_scan = 2.0
+    let sc = grid(400, 400, 0.01, |xs, ys| {
+        let (x, y) = (xs - 2.0 - t[0] + 1.5, ys - 2.0 - t[1] + 1.5);
+        Some(part(x, y) + tilt * xs)
+    });
+    let r = register(&sim, &sc, 0.02).expect("registers");
+    let err_phi = (r.pose.rotation_deg() + 540.0).rem_euclid(360.0) - 180.0;
+    assert!(err_phi.abs() < 0.02, "rotation {}", r.pose.rotation_deg());
+    assert!(
+        (r.pose.shift_mm[0] - t[0]).abs() < 2e-3 && (r.pose.shift_mm[1] - t[1]).abs() < 2e-3,
+        "shift {:?}",
+        r.pose.shift_mm
+    );
+    assert!((r.tilt_deg - 0.3).abs() < 0.01, "tilt {}", r.tilt_deg);
+}
