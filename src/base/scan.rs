@@ -153,8 +153,21 @@ impl Scan {
 
 /// Remove the least-squares plane `z = a + b x + c y` through the points with `valid` set from every point;
 /// returns `[b, c]`.
-#[allow(clippy::needless_range_loop)] // Gauss–Jordan on a 3×4 matrix reads best with indices
 pub fn remove_plane(z: &mut [f64], valid: &[bool], nx: usize, pitch_mm: f64) -> [f64; 2] {
+    let Some([a, b, c]) = fit_plane(z, valid, nx, pitch_mm) else {
+        return [0.0, 0.0];
+    };
+    for (k, v) in z.iter_mut().enumerate() {
+        let (x, y) = ((k % nx) as f64 * pitch_mm, (k / nx) as f64 * pitch_mm);
+        *v -= a + b * x + c * y;
+    }
+    [b, c]
+}
+
+/// The least-squares plane `z = a + b x + c y` through the points with `valid` set, `x = i·pitch`,
+/// `y = j·pitch` from point 0; `[a, b, c]`, or `None` when the points do not fix a plane.
+#[allow(clippy::needless_range_loop)] // Gauss–Jordan on a 3×4 matrix reads best with indices
+pub fn fit_plane(z: &[f64], valid: &[bool], nx: usize, pitch_mm: f64) -> Option<[f64; 3]> {
     let mut s = [[0.0f64; 4]; 3];
     for (k, v) in z.iter().enumerate() {
         if !valid[k] {
@@ -172,7 +185,7 @@ pub fn remove_plane(z: &mut [f64], valid: &[bool], nx: usize, pitch_mm: f64) -> 
     for c in 0..3 {
         let p = s[c][c];
         if p.abs() < 1e-300 {
-            return [0.0, 0.0];
+            return None;
         }
         for r in 0..3 {
             if r != c {
@@ -183,12 +196,7 @@ pub fn remove_plane(z: &mut [f64], valid: &[bool], nx: usize, pitch_mm: f64) -> 
             }
         }
     }
-    let (a, b, c) = (s[0][3] / s[0][0], s[1][3] / s[1][1], s[2][3] / s[2][2]);
-    for (k, v) in z.iter_mut().enumerate() {
-        let (x, y) = ((k % nx) as f64 * pitch_mm, (k / nx) as f64 * pitch_mm);
-        *v -= a + b * x + c * y;
-    }
-    [b, c]
+    Some([s[0][3] / s[0][0], s[1][3] / s[1][1], s[2][3] / s[2][2]])
 }
 
 #[cfg(test)]

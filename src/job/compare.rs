@@ -376,14 +376,7 @@ fn largest_window(g: &Grid, margin: usize, reach: usize, tile_mm: [f64; 2]) -> O
                     (j0 + ny).saturating_add(reach).min(g.ny),
                 );
                 if missing(a, b, c, d) == 0 {
-                    return Some(Window {
-                        i0,
-                        j0,
-                        nx,
-                        ny,
-                        tiles: [kx, ky],
-                        size_mm: [nx as f64 * p, ny as f64 * p],
-                    });
+                    return Some(Window::new(i0, j0, nx, ny, [kx, ky], p));
                 }
                 i0 += step;
             }

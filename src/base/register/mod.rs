@@ -171,44 +171,18 @@ impl Grid {
         }
     }
 
-    /// The least-squares plane `p₀ + p₁·(x − cₓ) + p₂·(y − cᵧ)` through the measured points, `c` the centre.
+    /// The least-squares plane `p₀ + p₁·(x − cₓ) + p₂·(y − cᵧ)` through the measured points, `c` the centre
+    /// ([`crate::base::scan::fit_plane`], whose origin is point 0, moved to the centre).
     fn plane(&self) -> [f64; 3] {
-        let c = self.centre();
-        let p = self.pitch_mm;
-        let mut a = [[0.0; 3]; 3];
-        let mut b = [0.0; 3];
-        for (k, z) in self.z.iter().enumerate() {
-            if !self.valid[k] {
-                continue;
-            }
-            let r = [
-                1.0,
-                ((k % self.nx) as f64 + 0.5) * p - c[0],
-                ((k / self.nx) as f64 + 0.5) * p - c[1],
-            ];
-            for i in 0..3 {
-                for j in 0..3 {
-                    a[i][j] += r[i] * r[j];
-                }
-                b[i] += r[i] * z;
-            }
-        }
-        solve::<3>(a, b).unwrap_or([0.0; 3])
+        let [a, b, c] = crate::base::scan::fit_plane(&self.z, &self.valid, self.nx, self.pitch_mm).unwrap_or([0.0; 3]);
+        let (o, h) = (self.centre(), 0.5 * self.pitch_mm);
+        [a + b * (o[0] - h) + c * (o[1] - h), b, c]
     }
 
     /// This grid less its least-squares plane.
     fn levelled(&self) -> Grid {
-        let [p0, p1, p2] = self.plane();
-        let c = self.centre();
-        let p = self.pitch_mm;
         let mut g = self.clone();
-        for (k, z) in g.z.iter_mut().enumerate() {
-            let (x, y) = (
-                ((k % self.nx) as f64 + 0.5) * p - c[0],
-                ((k / self.nx) as f64 + 0.5) * p - c[1],
-            );
-            *z -= p0 + p1 * x + p2 * y;
-        }
+        crate::base::scan::remove_plane(&mut g.z, &g.valid, g.nx, g.pitch_mm);
         g
     }
 }

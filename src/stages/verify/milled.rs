@@ -66,6 +66,18 @@ pub struct Window {
 }
 
 impl Window {
+    /// `nx × ny` cells from `(i0, j0)` of a grid at `pitch_mm`, holding `tiles` whole tiles.
+    pub fn new(i0: usize, j0: usize, nx: usize, ny: usize, tiles: [usize; 2], pitch_mm: f64) -> Self {
+        Self {
+            i0,
+            j0,
+            nx,
+            ny,
+            tiles,
+            size_mm: [nx as f64 * pitch_mm, ny as f64 * pitch_mm],
+        }
+    }
+
     /// The window is a whole number of tiles along both axes.
     pub fn whole(&self) -> bool {
         self.tiles[0] > 0 && self.tiles[1] > 0
@@ -88,14 +100,7 @@ pub fn window(hf: &Heightfield, margin: usize, tile_mm: [f64; 2]) -> Option<Wind
     };
     let (i0, nx, kx) = axis(hf.nx, tile_mm[0])?;
     let (j0, ny, ky) = axis(hf.ny, tile_mm[1])?;
-    Some(Window {
-        i0,
-        j0,
-        nx,
-        ny,
-        tiles: [kx, ky],
-        size_mm: [nx as f64 * p, ny as f64 * p],
-    })
+    Some(Window::new(i0, j0, nx, ny, [kx, ky], p))
 }
 
 /// Cells needed beyond the window on each side by [`slopes`] at this stepover: half a stepover plus the
