@@ -7,20 +7,10 @@
 //! 2 µm rms) and measure the scan as the verdict measured the cut (its figures against `metrics.json`). A
 //! scan of another job's cut must fail, saying why.
 
+mod common;
+
+use common::brdfmill;
 use std::path::{Path, PathBuf};
-use std::process::Command;
-
-fn root() -> &'static Path {
-    Path::new(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn brdfmill(args: &[&str]) -> std::process::Output {
-    Command::new(env!("CARGO_BIN_EXE_brdfmill"))
-        .current_dir(root())
-        .args(args)
-        .output()
-        .expect("run brdfmill")
-}
 
 fn json(path: &Path) -> serde_json::Value {
     serde_json::from_slice(&std::fs::read(path).unwrap()).unwrap_or_else(|e| panic!("{}: {e}", path.display()))
@@ -28,21 +18,7 @@ fn json(path: &Path) -> serde_json::Value {
 
 /// The default job on a 6 × 6 mm tile (a smaller part, the same machine and tool), for `target`.
 fn run_job(out: &Path, target: &str) {
-    let o = brdfmill(&[
-        "run",
-        "examples/default.toml",
-        "--out",
-        out.to_str().unwrap(),
-        "--set",
-        "facets.facets_x=6",
-        "--set",
-        "facets.facets_y=6",
-        "--set",
-        "toolpath.area_mm=[7.2,7.2]",
-        "--set",
-        &format!("target.brdf=\"{target}\""),
-    ]);
-    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    common::run_small_job(out, &[&format!("target.brdf=\"{target}\"")]);
 }
 
 /// The simulated cut: heights in mm, `nx`, `ny`, pitch in mm.

@@ -17,6 +17,8 @@
 //! mirror about the half vector), by code in this file, and the test first checks that MERL's published
 //! forward transform gives the angles back.
 
+mod common;
+
 use brdfmill::base::geometry::Vec3;
 use brdfmill::stages::brdf::merl::Merl;
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -299,32 +301,11 @@ fn export_writes_the_target_and_milled_brdfs_in_merls_layout() {
     use brdfmill::stages::brdf::Brdf;
     use brdfmill::stages::ndf::NdfFile;
     use brdfmill::stages::optics::geometric::MicrofacetBrdf;
-    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let dir = tempfile::tempdir().unwrap();
     let job = dir.path().join("job");
-    let brdfmill = |args: &[&str]| {
-        let o = std::process::Command::new(env!("CARGO_BIN_EXE_brdfmill"))
-            .current_dir(&root)
-            .args(args)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
-    };
     let spec = "beckmann:alpha=0.2,material=aluminium";
-    let job_s = job.to_str().unwrap();
-    brdfmill(&[
-        "run",
-        "examples/default.toml",
-        "--out",
-        job_s,
-        "--set",
-        "facets.facets_x=6",
-        "--set",
-        "facets.facets_y=6",
-        "--set",
-        "toolpath.area_mm=[7.2,7.2]",
-    ]);
-    brdfmill(&["export", job_s]);
+    common::run_small_job(&job, &[]);
+    common::brdfmill_ok(&["export", job.to_str().unwrap()]);
     let target = Brdf::parse(spec).unwrap();
     let surface = |name: &str| MicrofacetBrdf::new(NdfFile::read(&job.join(name)).unwrap().target(), target.material);
     let (design, milled) = (surface("ndf-design.json"), surface("ndf-milled.json"));

@@ -1,4 +1,5 @@
-//! `brdfmill export`: a job's BRDFs (target, design tile, simulated milled surface) as MERL tables.
+//! `brdfmill export`: a job's BRDFs (target, design tile, simulated milled surface) as RGL `.bsdf` files and
+//! MERL tables.
 
 use anyhow::Result;
 use std::path::PathBuf;
@@ -8,7 +9,8 @@ use std::path::PathBuf;
 pub struct Args {
     /// The job's output folder (from `brdfmill run`: its job.toml, ndf-design.json and ndf-milled.json)
     pub job: PathBuf,
-    /// Output folder (default: the job's folder): target.binary, design.binary, milled.binary
+    /// Output folder (default: the job's folder): target.bsdf, design.bsdf, milled.bsdf, target.binary,
+    /// design.binary, milled.binary
     #[arg(long)]
     pub out: Option<PathBuf>,
 }

@@ -20,9 +20,11 @@ pub mod highlight;
 pub mod merl;
 pub(crate) mod microfacet;
 pub mod rgl;
+pub mod rgl_write;
 mod spec;
 pub mod surface;
 pub(crate) mod tabulated;
+pub mod tensor;
 
 pub use fresnel::{ConductorIor, PRESETS};
 pub use highlight::Highlight;

@@ -1,10 +1,7 @@
 //! RGL material database `.bsdf` files (Dupuy & Jakob 2018, "An Adaptive Parameterization for Efficient
 //! Material Acquisition and Rendering"), stored in the `tensor_file` container.
 //!
-//! **Container** (little-endian): the 12 bytes `"tensor_file\0"`, `u8` major and minor version (1, 0), `u32`
-//! field count, then per field `u16` name length, the name, `u16` rank, `u8` dtype (1 u8, 2 i8, 3 u16,
-//! 4 i16, 5 u32, 6 i32, 7 u64, 8 i64, 9 f16, 10 f32, 11 f64), `u64` absolute byte offset and `u64` shape per
-//! axis; data is C-ordered.
+//! **Container**: [`TensorFile`] (`tensor.rs`).
 //!
 //! **Parameterisation.** Angles map to the unit square by `u = √(θ / (π/2))` and `v = (φ + π) / 2π`. A grid
 //! of `n` vertices spans `[0, 1]` inclusive (vertex `j` at `j/(n−1)`) and is interpolated bilinearly.
@@ -18,151 +15,12 @@
 //! Parameter grids (`theta_i`, `phi_i`) are interpolated linearly; with a single `phi_i` (or two) the
 //! material is isotropic and azimuths are taken relative to `φi`.
 
+pub use super::tensor::{Field, TensorFile};
 use super::{BrdfError, Rgb};
 use crate::base::geometry::{cos_sin_phi, Vec3};
 use crate::base::Invalid;
-use std::collections::BTreeMap;
 use std::f64::consts::{FRAC_PI_2, PI, TAU};
 use std::path::Path;
-
-/// One field of a tensor file, converted to `f64`.
-#[derive(Clone, Debug)]
-pub struct Field {
-    /// Shape, outermost axis first.
-    pub shape: Vec<usize>,
-    /// Values in C order.
-    pub data: Vec<f64>,
-    /// The raw dtype code.
-    pub dtype: u8,
-}
-
-/// A parsed `tensor_file`: named fields.
-#[derive(Clone, Debug)]
-pub struct TensorFile {
-    /// Format version `(major, minor)`.
-    pub version: (u8, u8),
-    /// Fields by name.
-    pub fields: BTreeMap<String, Field>,
-}
-
-fn dtype_size(code: u8) -> Option<usize> {
-    Some(match code {
-        1 | 2 => 1,
-        3 | 4 | 9 => 2,
-        5 | 6 | 10 => 4,
-        7 | 8 | 11 => 8,
-        _ => return None,
-    })
-}
-
-fn decode(code: u8, b: &[u8]) -> f64 {
-    match code {
-        1 => b[0] as f64,
-        2 => b[0] as i8 as f64,
-        3 => u16::from_le_bytes([b[0], b[1]]) as f64,
-        4 => i16::from_le_bytes([b[0], b[1]]) as f64,
-        5 => u32::from_le_bytes(b.try_into().unwrap()) as f64,
-        6 => i32::from_le_bytes(b.try_into().unwrap()) as f64,
-        7 => u64::from_le_bytes(b.try_into().unwrap()) as f64,
-        8 => i64::from_le_bytes(b.try_into().unwrap()) as f64,
-        9 => f16_to_f64(u16::from_le_bytes([b[0], b[1]])),
-        10 => f32::from_le_bytes(b.try_into().unwrap()) as f64,
-        _ => f64::from_le_bytes(b.try_into().unwrap()),
-    }
-}
-
-fn f16_to_f64(h: u16) -> f64 {
-    let sign = if h & 0x8000 != 0 { -1.0 } else { 1.0 };
-    let exp = ((h >> 10) & 0x1f) as i32;
-    let man = (h & 0x3ff) as f64;
-    sign * match exp {
-        0 => man * 2f64.powi(-24),
-        31 if man == 0.0 => f64::INFINITY,
-        31 => f64::NAN,
-        e => (1.0 + man / 1024.0) * 2f64.powi(e - 15),
-    }
-}
-
-impl TensorFile {
-    /// Parse a tensor file from bytes; errors say which field or byte offset is wrong.
-    pub fn parse(bytes: &[u8]) -> Result<Self, Invalid> {
-        let mut pos = 0usize;
-        let take = |pos: &mut usize, n: usize, what: &str| -> Result<&[u8], String> {
-            let end = pos.checked_add(n).filter(|e| *e <= bytes.len()).ok_or_else(|| {
-                format!(
-                    "truncated: {what} at byte {} needs {n} bytes, file has {}",
-                    *pos,
-                    bytes.len()
-                )
-            })?;
-            let s = &bytes[*pos..end];
-            *pos = end;
-            Ok(s)
-        };
-        if take(&mut pos, 12, "magic")? != b"tensor_file\0" {
-            return Err(Invalid(
-                "not a tensor file: the first 12 bytes are not \"tensor_file\\0\"".into(),
-            ));
-        }
-        let v = take(&mut pos, 2, "version")?;
-        let version = (v[0], v[1]);
-        if version.0 != 1 {
-            return Err(Invalid(format!(
-                "tensor_file version {}.{} is not supported (expected 1.x)",
-                v[0], v[1]
-            )));
-        }
-        let n = u32::from_le_bytes(take(&mut pos, 4, "field count")?.try_into().unwrap()) as usize;
-        let mut fields = BTreeMap::new();
-        for _ in 0..n {
-            let len = u16::from_le_bytes(take(&mut pos, 2, "name length")?.try_into().unwrap()) as usize;
-            let name = String::from_utf8_lossy(take(&mut pos, len, "field name")?).into_owned();
-            let rank = u16::from_le_bytes(take(&mut pos, 2, "rank")?.try_into().unwrap()) as usize;
-            let dtype = take(&mut pos, 1, "dtype")?[0];
-            let offset = u64::from_le_bytes(take(&mut pos, 8, "offset")?.try_into().unwrap()) as usize;
-            let mut shape = Vec::with_capacity(rank);
-            for _ in 0..rank {
-                shape.push(u64::from_le_bytes(take(&mut pos, 8, "shape")?.try_into().unwrap()) as usize);
-            }
-            let size = dtype_size(dtype).ok_or_else(|| format!("field `{name}`: unknown dtype code {dtype}"))?;
-            let count = shape
-                .iter()
-                .try_fold(1usize, |a, s| a.checked_mul(*s))
-                .ok_or_else(|| format!("field `{name}`: shape {shape:?} overflows"))?;
-            let end = count
-                .checked_mul(size)
-                .and_then(|b| b.checked_add(offset))
-                .filter(|e| *e <= bytes.len())
-                .ok_or_else(|| {
-                    format!(
-                        "field `{name}`: {count} values of {size} bytes at offset {offset} run past the end of the file ({} bytes)",
-                        bytes.len()
-                    )
-                })?;
-            let data = bytes[offset..end]
-                .chunks_exact(size)
-                .map(|b| decode(dtype, b))
-                .collect();
-            fields.insert(name, Field { shape, data, dtype });
-        }
-        Ok(Self { version, fields })
-    }
-
-    fn field(&self, name: &str, rank: usize) -> Result<&Field, String> {
-        let f = self.fields.get(name).ok_or_else(|| format!("missing field `{name}`"))?;
-        if f.shape.len() != rank {
-            return Err(format!(
-                "field `{name}` has rank {} (shape {:?}), expected {rank}",
-                f.shape.len(),
-                f.shape
-            ));
-        }
-        if let Some(k) = f.data.iter().position(|v| !v.is_finite()) {
-            return Err(format!("field `{name}`: value {k} is not finite"));
-        }
-        Ok(f)
-    }
-}
 
 /// A bilinear grid over `[0, 1]²` with `nx × ny` vertices (x the fast axis).
 #[derive(Clone, Debug)]
@@ -192,7 +50,7 @@ impl Grid2 {
 
 /// The inverse-CDF warp of one `vndf` slice: density and its cumulative sums (normalised).
 #[derive(Clone, Debug)]
-struct Warp {
+pub(super) struct Warp {
     d: Vec<f64>,
     /// Row-wise cumulative trapezoid sums, `cc[y·nx + x]`.
     cc: Vec<f64>,
@@ -201,7 +59,8 @@ struct Warp {
 }
 
 impl Warp {
-    fn new(d: &[f64], nx: usize, ny: usize) -> Self {
+    /// The warp of the density `d` on `nx × ny` vertices (normalised here).
+    pub(super) fn new(d: &[f64], nx: usize, ny: usize) -> Self {
         let mut cc = vec![0.0; nx * ny];
         for y in 0..ny {
             for x in 1..nx {
@@ -287,18 +146,27 @@ impl RglBsdf {
             return Err(Invalid("theta_i and phi_i must not be empty".into()));
         }
         // radians; f32 in the file, so π/2 may come out a few ulps above
-        for (name, axis, hi) in [
-            ("theta_i", &theta_i, std::f64::consts::FRAC_PI_2),
-            ("phi_i", &phi_i, std::f64::consts::TAU),
-        ] {
-            if axis.iter().any(|v| !(v.is_finite() && (-1e-6..=hi + 1e-6).contains(v))) {
+        // azimuths: a reader takes φ = atan2(y, x) in [−π, π]; published isotropic files hold one at 0
+        for (name, axis, lo, hi) in [("theta_i", &theta_i, 0.0, FRAC_PI_2), ("phi_i", &phi_i, -PI, TAU)] {
+            if axis
+                .iter()
+                .any(|v| !(v.is_finite() && (lo - 1e-6..=hi + 1e-6).contains(v)))
+            {
                 return Err(Invalid(format!(
-                    "`{name}` must hold angles in [0, {hi:.6}] rad, got {axis:?}"
+                    "`{name}` must hold angles in [{lo:.6}, {hi:.6}] rad, got {axis:?}"
                 )));
             }
             if axis.windows(2).any(|w| w[1] <= w[0]) {
                 return Err(Invalid(format!("`{name}` must be strictly increasing, got {axis:?}")));
             }
+        }
+        // An anisotropic file whose azimuths cover part of the circle relies on the reader folding incident
+        // directions by its symmetry (Mitsuba's `reduction`); this reader does not fold, so it refuses them.
+        if np > 2 && phi_i[np - 1] - phi_i[0] < TAU - 1e-3 {
+            return Err(Invalid(format!(
+                "`phi_i` spans {:.4} rad of azimuth: anisotropic files reduced by symmetry are not read (whole-circle [−π, π] files are)",
+                phi_i[np - 1] - phi_i[0]
+            )));
         }
         let grid2 = |name: &str| -> Result<Grid2, Invalid> {
             let f = tf.field(name, 2)?;
@@ -453,36 +321,73 @@ impl RglBsdf {
     /// Map a half-vector coordinate to the reflectance grid's `sample` coordinate by the inverse cumulative
     /// distribution of the (slice-interpolated) vndf: continuous in both axes, bilinear density.
     fn invert_vndf(&self, slices: &[(usize, f64); 4], u: (f64, f64)) -> (f64, f64) {
-        let (nx, ny) = self.vndf_n;
-        let (px, sx) = cell(u.0, nx);
-        let (py, sy) = cell(u.1, ny);
-        let lerp = |f: &dyn Fn(&Warp) -> f64| -> f64 {
+        invert_blend(self.vndf_n, u, &|f| {
             slices
                 .iter()
                 .filter(|(_, w)| *w > 0.0)
                 .map(|(s, w)| w * f(&self.vndf[*s]))
                 .sum()
-        };
-        let v00 = lerp(&|w| w.d[py * nx + px]);
-        let v10 = lerp(&|w| w.d[py * nx + px + 1]);
-        let v01 = lerp(&|w| w.d[(py + 1) * nx + px]);
-        let v11 = lerp(&|w| w.d[(py + 1) * nx + px + 1]);
-        let c0 = (1.0 - sy) * v00 + sy * v01;
-        let c1 = (1.0 - sy) * v10 + sy * v11;
-        let r0 = lerp(&|w| w.cc[py * nx + nx - 1]);
-        let r1 = lerp(&|w| w.cc[(py + 1) * nx + nx - 1]);
-        let cc0 = lerp(&|w| w.cc[py * nx + px]);
-        let cc1 = lerp(&|w| w.cc[(py + 1) * nx + px]);
-        let mc = lerp(&|w| w.mc[py]);
-        let row = (1.0 - sy) * r0 + sy * r1;
-        let x = if row > 0.0 {
-            (sx * (c0 + 0.5 * sx * (c1 - c0)) + (1.0 - sy) * cc0 + sy * cc1) / row
-        } else {
-            u.0
-        };
-        let y = sy * (r0 + 0.5 * sy * (r1 - r0)) + mc;
-        (x.clamp(0.0, 1.0), y.clamp(0.0, 1.0))
+        })
     }
+}
+
+impl Warp {
+    /// The inverse cumulative distribution of this one slice at `u` (what a reader does at a measured
+    /// incident direction).
+    pub(super) fn invert(&self, n: (usize, usize), u: (f64, f64)) -> (f64, f64) {
+        invert_blend(n, u, &|f| f(self))
+    }
+
+    /// The forward warp: the `u` whose [`Warp::invert`] is `s`, by bisection on each axis (the marginal's
+    /// coordinate depends on `u.1` alone and rises with it; the conditional's rises with `u.0`), to 2⁻⁵⁰.
+    pub(super) fn sample(&self, n: (usize, usize), s: (f64, f64)) -> (f64, f64) {
+        let solve = |target: f64, f: &dyn Fn(f64) -> f64| -> f64 {
+            let (mut lo, mut hi) = (0.0f64, 1.0f64);
+            for _ in 0..50 {
+                let mid = 0.5 * (lo + hi);
+                if f(mid) < target {
+                    lo = mid;
+                } else {
+                    hi = mid;
+                }
+            }
+            0.5 * (lo + hi)
+        };
+        let y = solve(s.1, &|v| self.invert(n, (0.5, v)).1);
+        let x = solve(s.0, &|v| self.invert(n, (v, y)).0);
+        (x, y)
+    }
+}
+
+/// Reads a value of a warp (a closure over one [`Warp`]) blended over the slices that hold the direction.
+type Blend<'a> = dyn Fn(&dyn Fn(&Warp) -> f64) -> f64 + 'a;
+
+/// The inverse CDF of a bilinear density on `n = (nx, ny)` vertices over `[0, 1]²` (Mitsuba's continuous
+/// `Marginal2D::invert`): the marginal over rows first, then the conditional along the row. `lerp` reads a
+/// value of the warp, blended over the interpolated slices.
+fn invert_blend(n: (usize, usize), u: (f64, f64), lerp: &Blend) -> (f64, f64) {
+    let (nx, ny) = n;
+    let (px, sx) = cell(u.0, nx);
+    let (py, sy) = cell(u.1, ny);
+    let v00 = lerp(&|w| w.d[py * nx + px]);
+    let v10 = lerp(&|w| w.d[py * nx + px + 1]);
+    let v01 = lerp(&|w| w.d[(py + 1) * nx + px]);
+    let v11 = lerp(&|w| w.d[(py + 1) * nx + px + 1]);
+    let c0 = (1.0 - sy) * v00 + sy * v01;
+    let c1 = (1.0 - sy) * v10 + sy * v11;
+    let r0 = lerp(&|w| w.cc[py * nx + nx - 1]);
+    let r1 = lerp(&|w| w.cc[(py + 1) * nx + nx - 1]);
+    let cc0 = lerp(&|w| w.cc[py * nx + px]);
+    let cc1 = lerp(&|w| w.cc[(py + 1) * nx + px]);
+    let mc = lerp(&|w| w.mc[py]);
+    let row = (1.0 - sy) * r0 + sy * r1;
+    let x = if row > 0.0 {
+        (sx * (c0 + 0.5 * sx * (c1 - c0)) + (1.0 - sy) * cc0 + sy * cc1) / row
+    } else {
+        u.0
+    };
+    let y = sy * (r0 + 0.5 * sy * (r1 - r0)) + mc;
+    (x.clamp(0.0, 1.0), y.clamp(0.0, 1.0))
 }
 
 #[cfg(test)]
@@ -497,28 +402,20 @@ mod tests {
     }
 
     #[test]
-    fn f16_decodes() {
-        assert_eq!(f16_to_f64(0x3c00), 1.0);
-        assert_eq!(f16_to_f64(0xc000), -2.0);
-        assert_eq!(f16_to_f64(0x7bff), 65504.0);
-    }
-
-    #[test]
-    fn header_errors_are_reported() {
-        assert!(TensorFile::parse(b"tensor_fil").unwrap_err().contains("truncated"));
-        assert!(TensorFile::parse(b"not_a_tensor_file_at_all")
-            .unwrap_err()
-            .contains("not a tensor file"));
-        let mut b = b"tensor_file\0".to_vec();
-        b.extend_from_slice(&[1, 0, 1, 0, 0, 0]);
-        b.extend_from_slice(&3u16.to_le_bytes());
-        b.extend_from_slice(b"ndf");
-        b.extend_from_slice(&1u16.to_le_bytes());
-        b.push(10);
-        b.extend_from_slice(&1000u64.to_le_bytes());
-        b.extend_from_slice(&4u64.to_le_bytes());
-        let e = TensorFile::parse(&b).unwrap_err();
-        assert!(e.contains("`ndf`") && e.contains("past the end"), "{e}");
+    fn anisotropic_files_reduced_by_symmetry_are_refused() {
+        use crate::stages::brdf::tensor::{encode, Values};
+        let angles = |v: &[f32]| Values::F32(v.to_vec());
+        let file = |phi: &[f32]| {
+            encode(&[
+                ("theta_i", vec![2], angles(&[0.0, 1.0])),
+                ("phi_i", vec![phi.len()], angles(phi)),
+            ])
+        };
+        let e = RglBsdf::from_bytes(&file(&[-std::f32::consts::PI, -2.0, -std::f32::consts::FRAC_PI_2])).unwrap_err();
+        assert!(e.contains("reduced by symmetry"), "{e}");
+        // a whole-circle file gets past the azimuths (and stops at its missing grids)
+        let e = RglBsdf::from_bytes(&file(&[-std::f32::consts::PI, 0.0, std::f32::consts::PI])).unwrap_err();
+        assert!(e.contains("missing field `ndf`"), "{e}");
     }
 
     #[test]

@@ -1,0 +1,230 @@
+//! RGL `.bsdf` files against their peer, Mitsuba 3's `measured` plugin (`pip install mitsuba`; the Python is
+//! `$BRDFMILL_MITSUBA_PYTHON`, else `python3`). Mitsuba is run by `tests/mitsuba/measured_eval.py`, which
+//! returns its `BSDF.eval` (f·cosθo, in float32) at directions drawn here and renders a small image.
+//!
+//! - The two published files in `tests/data/rgl`: brdfmill's reader gives Mitsuba's values (negative
+//!   reflectance clipped, as brdfmill clips it), so a file means to brdfmill what it means to Mitsuba.
+//! - Files brdfmill writes (an analytic BRDF, and `brdfmill export`'s `target.bsdf`, `design.bsdf`,
+//!   `milled.bsdf`): Mitsuba loads them, its values agree with brdfmill's reader of the same file to float32
+//!   precision, and with the BRDF brdfmill tabulated to the tabulation's resolution (relative L1, cosine
+//!   weighted, under 2%); an image of the material under a directional light has the brightness that BRDF
+//!   gives.
+//!
+//! Without Mitsuba these tests fail (they are ignored in `cargo test`; `.ci/run` installs Mitsuba and runs them).
+
+use brdfmill::base::geometry::{spherical, Vec3};
+use brdfmill::stages::brdf::rgl_write::{write_rgl, RglSource};
+use brdfmill::stages::brdf::{Brdf, RglBsdf};
+mod common;
+
+use common::root;
+use std::path::Path;
+use std::process::Command;
+
+type Rgb = [f64; 3];
+
+/// A BRDF `f(wi, wo)` without the cosine.
+type BrdfFn<'a> = &'a dyn Fn(&Vec3, &Vec3) -> Rgb;
+
+/// The Python that has Mitsuba 3; panics with what to install when there is none.
+fn python() -> String {
+    let py = std::env::var("BRDFMILL_MITSUBA_PYTHON").unwrap_or_else(|_| "python3".into());
+    let ok = Command::new(&py)
+        .args(["-c", "import mitsuba"])
+        .output()
+        .map(|o| o.status.success())
+        .unwrap_or(false);
+    assert!(
+        ok,
+        "needs Mitsuba 3: `{py}` cannot import mitsuba (pip install mitsuba, or point BRDFMILL_MITSUBA_PYTHON at a Python that has it)"
+    );
+    py
+}
+
+/// Direction pairs over the hemisphere: `cosθ` uniform in [0.15, 1] for both (polar angles up to 81°),
+/// azimuths uniform, from a fixed linear congruential sequence.
+fn pairs(n: usize, seed: u64) -> Vec<(Vec3, Vec3)> {
+    let mut s = seed;
+    let mut next = move || {
+        s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    let mut dir = move || spherical((0.15 + 0.85 * next()).acos(), std::f64::consts::TAU * next());
+    (0..n).map(|_| (dir(), dir())).collect()
+}
+
+/// Mitsuba's `eval` at `pairs`, and with `light` the mean pixel of the rendered square.
+fn mitsuba(bsdf: &Path, pairs: &[(Vec3, Vec3)], light: Option<Vec3>) -> (Vec<Rgb>, Option<Rgb>) {
+    let dir = tempfile::tempdir().unwrap();
+    let (dirs, out) = (dir.path().join("dirs.csv"), dir.path().join("out.csv"));
+    let text: String = pairs
+        .iter()
+        .map(|(a, b)| {
+            format!(
+                "{:.17},{:.17},{:.17},{:.17},{:.17},{:.17}\n",
+                a.x, a.y, a.z, b.x, b.y, b.z
+            )
+        })
+        .collect();
+    std::fs::write(&dirs, text).unwrap();
+    let mut cmd = Command::new(python());
+    cmd.arg(root().join("tests/mitsuba/measured_eval.py"))
+        .arg(bsdf)
+        .arg(&dirs)
+        .arg(&out);
+    if let Some(l) = light {
+        cmd.args([l.x, l.y, l.z].map(|v| format!("{v:.17}")));
+    }
+    let o = cmd.output().unwrap();
+    assert!(
+        o.status.success(),
+        "Mitsuba on {}: {}",
+        bsdf.display(),
+        String::from_utf8_lossy(&o.stderr)
+    );
+    let mut values = vec![];
+    let mut render = None;
+    for line in std::fs::read_to_string(&out).unwrap().lines() {
+        let rgb = |f: &[&str]| -> Rgb { std::array::from_fn(|c| f[c].parse().unwrap()) };
+        let f: Vec<&str> = line.split(',').collect();
+        if f[0] == "render" {
+            render = Some(rgb(&f[1..]));
+        } else {
+            values.push(rgb(&f));
+        }
+    }
+    assert_eq!(values.len(), pairs.len());
+    (values, render)
+}
+
+/// Relative L1 of `a` against `reference` over all channels: Σ|a − r| / Σ|r|.
+fn relative_l1(a: &[Rgb], reference: &[Rgb]) -> f64 {
+    let (mut num, mut den) = (0.0, 0.0);
+    for (x, r) in a.iter().zip(reference) {
+        for c in 0..3 {
+            num += (x[c] - r[c]).abs();
+            den += r[c].abs();
+        }
+    }
+    num / den
+}
+
+/// The largest difference relative to the largest value (so float32 rounding of small values does not count
+/// as much as of the peak).
+fn worst_relative_to_peak(a: &[Rgb], reference: &[Rgb]) -> f64 {
+    let peak = reference.iter().flatten().fold(0.0f64, |m, v| m.max(v.abs()));
+    a.iter()
+        .zip(reference)
+        .flat_map(|(x, r)| (0..3).map(move |c| (x[c] - r[c]).abs()))
+        .fold(0.0, f64::max)
+        / peak
+}
+
+fn times_cos(f: impl Fn(&Vec3, &Vec3) -> Rgb, pairs: &[(Vec3, Vec3)]) -> Vec<Rgb> {
+    pairs.iter().map(|(wi, wo)| f(wi, wo).map(|v| v * wo.z)).collect()
+}
+
+/// Check a written file against Mitsuba, brdfmill's reader and the BRDF it tabulates; returns the figures.
+fn check_written(path: &Path, f: BrdfFn, what: &str) -> (f64, f64, f64) {
+    let p = pairs(3000, 7);
+    // near the mirror direction of the view, where even a narrow lobe is bright (a far tail would test the
+    // tabulation's resolution, which the L1 above covers)
+    let light = spherical(0.2, 0.3);
+    let (theirs, render) = mitsuba(path, &p, Some(light));
+    let reader = RglBsdf::read(path).unwrap();
+    let read = times_cos(|a, b| reader.eval(a, b), &p);
+    let tabulated = times_cos(f, &p);
+    let format = worst_relative_to_peak(&theirs, &read);
+    let l1 = relative_l1(&theirs, &tabulated);
+    // the square seen from the normal, lit from `light` with unit irradiance: L = f(view, light) cosθ_light
+    let want = f(&Vec3::new(0.0, 0.0, 1.0), &light).map(|v| v * light.z);
+    let got = render.unwrap();
+    let image = (0..3).map(|c| (got[c] / want[c] - 1.0).abs()).fold(0.0, f64::max);
+    println!(
+        "{what}: Mitsuba vs brdfmill's reader {format:.1e} of the peak; vs the tabulated BRDF relative L1 {l1:.4}; rendered square {got:?} vs {want:?} ({image:.4})"
+    );
+    assert!(
+        format < 1e-3,
+        "{what}: Mitsuba and brdfmill's reader differ by {format:e} of the peak"
+    );
+    assert!(
+        l1 < 0.02,
+        "{what}: Mitsuba's values differ from the tabulated BRDF by relative L1 {l1}"
+    );
+    assert!(image < 0.01, "{what}: rendered {got:?}, the BRDF gives {want:?}");
+    (format, l1, image)
+}
+
+#[test]
+#[ignore = "needs Mitsuba 3 (pip install mitsuba)"]
+fn published_rgl_files_read_as_mitsuba_reads_them() {
+    for name in ["paper_white_rgb.bsdf", "vch_golden_yellow_rgb.bsdf"] {
+        let path = root().join("tests/data/rgl").join(name);
+        let p = pairs(3000, 11);
+        let (theirs, _) = mitsuba(&path, &p, None);
+        // brdfmill clips negative reflectance (vch_golden_yellow's blue dips below zero near the peak,
+        // down to −0.25 where green is 3.2); Mitsuba returns it as stored
+        let theirs: Vec<Rgb> = theirs.iter().map(|v| v.map(|c| c.max(0.0))).collect();
+        let r = RglBsdf::read(&path).unwrap();
+        let ours = times_cos(|a, b| r.eval(a, b), &p);
+        let worst = worst_relative_to_peak(&ours, &theirs);
+        let l1 = relative_l1(&ours, &theirs);
+        println!(
+            "{name}: brdfmill's reader vs Mitsuba: largest difference {worst:.1e} of the peak, relative L1 {l1:.1e}"
+        );
+        assert!(
+            worst < 1e-3 && l1 < 1e-3,
+            "{name}: {worst:e} of the peak, relative L1 {l1:e}"
+        );
+    }
+}
+
+#[test]
+#[ignore = "needs Mitsuba 3 (pip install mitsuba)"]
+fn an_analytic_brdf_written_as_rgl_renders_in_mitsuba() {
+    let dir = tempfile::tempdir().unwrap();
+    for spec in [
+        "ggx:ax=0.15,ay=0.3,material=gold",
+        "beckmann:alpha=0.1,material=aluminium",
+    ] {
+        let b = Brdf::parse(spec).unwrap();
+        let d = |m: &Vec3| b.known_ndf(m).unwrap();
+        let f = |wi: &Vec3, wo: &Vec3| b.eval(wi, wo);
+        let path = dir.path().join("analytic.bsdf");
+        let src = RglSource {
+            description: spec.into(),
+            ndf: &d,
+            brdf: &f,
+        };
+        write_rgl(&path, &src).unwrap();
+        check_written(&path, &f, spec);
+    }
+}
+
+/// `brdfmill export` on a small job's output: `target.bsdf`, `design.bsdf` and `milled.bsdf` hold, for
+/// Mitsuba, the BRDFs the report shows (the target, and the microfacet BRDFs of the NDFs the verdict measured
+/// with the target's material).
+#[test]
+#[ignore = "needs Mitsuba 3 (pip install mitsuba); runs a job (about 10 s)"]
+fn exported_bsdf_files_render_in_mitsuba_as_the_report_shows_them() {
+    use brdfmill::stages::ndf::NdfFile;
+    use brdfmill::stages::optics::geometric::MicrofacetBrdf;
+    let dir = tempfile::tempdir().unwrap();
+    let job = dir.path().join("job");
+    common::run_small_job(&job, &[]);
+    common::brdfmill_ok(&["export", job.to_str().unwrap()]);
+    let target = Brdf::parse("beckmann:alpha=0.2,material=aluminium").unwrap();
+    let surface = |name: &str| MicrofacetBrdf::new(NdfFile::read(&job.join(name)).unwrap().target(), target.material);
+    let (design, milled) = (surface("ndf-design.json"), surface("ndf-milled.json"));
+    let target_f = |a: &Vec3, b: &Vec3| target.eval(a, b);
+    let design_f = |a: &Vec3, b: &Vec3| design.eval(a, b);
+    let milled_f = |a: &Vec3, b: &Vec3| milled.eval(a, b);
+    let files: [(&str, BrdfFn); 3] = [
+        ("target.bsdf", &target_f),
+        ("design.bsdf", &design_f),
+        ("milled.bsdf", &milled_f),
+    ];
+    for (name, f) in files {
+        check_written(&job.join(name), f, name);
+    }
+}
