@@ -41,7 +41,7 @@ fn python() -> String {
     py
 }
 
-/// Direction pairs over the hemisphere: `cosθ` uniform in [0.15, 1] for both (polar angles up to 81°),
+/// Direction pairs over the hemisphere: `cosθ` uniform in [0.0087, 1] for both (polar angles up to 89.5°),
 /// azimuths uniform, from a fixed linear congruential sequence.
 fn pairs(n: usize, seed: u64) -> Vec<(Vec3, Vec3)> {
     let mut s = seed;
@@ -49,12 +49,32 @@ fn pairs(n: usize, seed: u64) -> Vec<(Vec3, Vec3)> {
         s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
         (s >> 11) as f64 / (1u64 << 53) as f64
     };
-    let mut dir = move || spherical((0.15 + 0.85 * next()).acos(), std::f64::consts::TAU * next());
+    let mut dir = move || {
+        spherical(
+            (0.0087 + (1.0 - 0.0087) * next()).acos(),
+            std::f64::consts::TAU * next(),
+        )
+    };
     (0..n).map(|_| (dir(), dir())).collect()
 }
 
-/// Mitsuba's `eval` at `pairs`, and with `light` the mean pixel of the rendered square.
-fn mitsuba(bsdf: &Path, pairs: &[(Vec3, Vec3)], light: Option<Vec3>) -> (Vec<Rgb>, Option<Rgb>) {
+/// What Mitsuba answered.
+struct Answer {
+    /// `eval` at each pair.
+    values: Vec<Rgb>,
+    /// The rendered square's mean pixel, when a light was given.
+    render: Option<Rgb>,
+    /// Per incident direction asked: the albedo by Mitsuba's own sampling, and the largest relative
+    /// difference between a sample's pdf and `pdf` of its direction.
+    albedo: Vec<(Rgb, f64)>,
+}
+
+/// Samples per albedo by Mitsuba's sampling (a stratified 200 × 200 grid).
+const ALBEDO_SAMPLES: usize = 40_000;
+
+/// Run Mitsuba on `bsdf`: `eval` at `pairs`, with `light` the rendered square, and the albedo at each of
+/// `albedo_at`.
+fn mitsuba(bsdf: &Path, pairs: &[(Vec3, Vec3)], light: Option<Vec3>, albedo_at: &[Vec3]) -> Answer {
     let dir = tempfile::tempdir().unwrap();
     let (dirs, out) = (dir.path().join("dirs.csv"), dir.path().join("out.csv"));
     let text: String = pairs
@@ -73,7 +93,12 @@ fn mitsuba(bsdf: &Path, pairs: &[(Vec3, Vec3)], light: Option<Vec3>) -> (Vec<Rgb
         .arg(&dirs)
         .arg(&out);
     if let Some(l) = light {
-        cmd.args([l.x, l.y, l.z].map(|v| format!("{v:.17}")));
+        cmd.arg("--light").args([l.x, l.y, l.z].map(|v| format!("{v:.17}")));
+    }
+    for w in albedo_at {
+        cmd.arg("--albedo")
+            .args([w.x, w.y, w.z].map(|v| format!("{v:.17}")))
+            .arg(ALBEDO_SAMPLES.to_string());
     }
     let o = cmd.output().unwrap();
     assert!(
@@ -82,19 +107,41 @@ fn mitsuba(bsdf: &Path, pairs: &[(Vec3, Vec3)], light: Option<Vec3>) -> (Vec<Rgb
         bsdf.display(),
         String::from_utf8_lossy(&o.stderr)
     );
-    let mut values = vec![];
-    let mut render = None;
+    let mut a = Answer {
+        values: vec![],
+        render: None,
+        albedo: vec![],
+    };
+    let num = |f: &str| -> f64 { f.parse().unwrap() };
     for line in std::fs::read_to_string(&out).unwrap().lines() {
-        let rgb = |f: &[&str]| -> Rgb { std::array::from_fn(|c| f[c].parse().unwrap()) };
         let f: Vec<&str> = line.split(',').collect();
-        if f[0] == "render" {
-            render = Some(rgb(&f[1..]));
-        } else {
-            values.push(rgb(&f));
+        let rgb = |f: &[&str]| -> Rgb { std::array::from_fn(|c| num(f[c])) };
+        match f[0] {
+            "render" => a.render = Some(rgb(&f[1..])),
+            "albedo" => a.albedo.push((rgb(&f[1..]), num(f[4]))),
+            _ => a.values.push(rgb(&f)),
         }
     }
-    assert_eq!(values.len(), pairs.len());
-    (values, render)
+    assert_eq!(a.values.len(), pairs.len());
+    assert_eq!(a.albedo.len(), albedo_at.len());
+    a
+}
+
+/// The directional albedo `∫ f cosθo dωo` at `wi` by quadrature over the hemisphere in `(√(θ/90°), φ)`.
+fn albedo(f: BrdfFn, wi: &Vec3) -> Rgb {
+    let (nu, nphi) = (400, 300);
+    let mut a = [0.0; 3];
+    for iu in 0..nu {
+        let u = (iu as f64 + 0.5) / nu as f64;
+        let th = u * u * std::f64::consts::FRAC_PI_2;
+        let jac = 2.0 * u * std::f64::consts::FRAC_PI_2 * th.sin() / nu as f64 * std::f64::consts::TAU / nphi as f64;
+        for jp in 0..nphi {
+            let wo = spherical(th, (jp as f64 + 0.5) / nphi as f64 * std::f64::consts::TAU);
+            let v = f(wi, &wo);
+            (0..3).for_each(|c| a[c] += v[c] * wo.z * jac);
+        }
+    }
+    a
 }
 
 /// Relative L1 of `a` against `reference` over all channels: Σ|a − r| / Σ|r|.
@@ -124,21 +171,22 @@ fn times_cos(f: impl Fn(&Vec3, &Vec3) -> Rgb, pairs: &[(Vec3, Vec3)]) -> Vec<Rgb
     pairs.iter().map(|(wi, wo)| f(wi, wo).map(|v| v * wo.z)).collect()
 }
 
-/// Check a written file against Mitsuba, brdfmill's reader and the BRDF it tabulates; returns the figures.
-fn check_written(path: &Path, f: BrdfFn, what: &str) -> (f64, f64, f64) {
+/// Check a written file against Mitsuba, brdfmill's reader and the BRDF it tabulates.
+fn check_written(path: &Path, f: BrdfFn, what: &str) {
     let p = pairs(3000, 7);
     // near the mirror direction of the view, where even a narrow lobe is bright (a far tail would test the
-    // tabulation's resolution, which the L1 above covers)
+    // tabulation's resolution, which the L1 below covers)
     let light = spherical(0.2, 0.3);
-    let (theirs, render) = mitsuba(path, &p, Some(light));
+    let incident = [spherical(0.5, 0.3), spherical(1.3, -2.0)];
+    let answer = mitsuba(path, &p, Some(light), &incident);
     let reader = RglBsdf::read(path).unwrap();
     let read = times_cos(|a, b| reader.eval(a, b), &p);
     let tabulated = times_cos(f, &p);
-    let format = worst_relative_to_peak(&theirs, &read);
-    let l1 = relative_l1(&theirs, &tabulated);
+    let format = worst_relative_to_peak(&answer.values, &read);
+    let l1 = relative_l1(&answer.values, &tabulated);
     // the square seen from the normal, lit from `light` with unit irradiance: L = f(view, light) cosθ_light
     let want = f(&Vec3::new(0.0, 0.0, 1.0), &light).map(|v| v * light.z);
-    let got = render.unwrap();
+    let got = answer.render.unwrap();
     let image = (0..3).map(|c| (got[c] / want[c] - 1.0).abs()).fold(0.0, f64::max);
     println!(
         "{what}: Mitsuba vs brdfmill's reader {format:.1e} of the peak; vs the tabulated BRDF relative L1 {l1:.4}; rendered square {got:?} vs {want:?} ({image:.4})"
@@ -152,7 +200,20 @@ fn check_written(path: &Path, f: BrdfFn, what: &str) -> (f64, f64, f64) {
         "{what}: Mitsuba's values differ from the tabulated BRDF by relative L1 {l1}"
     );
     assert!(image < 0.01, "{what}: rendered {got:?}, the BRDF gives {want:?}");
-    (format, l1, image)
+    // Mitsuba's importance sampling (the luminance and vndf warps) integrates to the BRDF's albedo
+    for (wi, (sampled, pdf)) in incident.iter().zip(&answer.albedo) {
+        let exact = albedo(f, wi);
+        let rel = (0..3).map(|c| (sampled[c] / exact[c] - 1.0).abs()).fold(0.0, f64::max);
+        println!(
+            "{what}: at θi {:.0}°, albedo by Mitsuba's sampling {sampled:?}, by quadrature {exact:?} ({rel:.4}); pdf {pdf:.1e}",
+            wi.z.acos().to_degrees()
+        );
+        assert!(
+            rel < 0.03,
+            "{what}: Mitsuba's sampled albedo {sampled:?}, the BRDF's {exact:?}"
+        );
+        assert!(*pdf < 1e-3, "{what}: a sample's pdf differs from pdf() by {pdf:e}");
+    }
 }
 
 #[test]
@@ -161,7 +222,7 @@ fn published_rgl_files_read_as_mitsuba_reads_them() {
     for name in ["paper_white_rgb.bsdf", "vch_golden_yellow_rgb.bsdf"] {
         let path = root().join("tests/data/rgl").join(name);
         let p = pairs(3000, 11);
-        let (theirs, _) = mitsuba(&path, &p, None);
+        let theirs = mitsuba(&path, &p, None, &[]).values;
         // brdfmill clips negative reflectance (vch_golden_yellow's blue dips below zero near the peak,
         // down to −0.25 where green is 3.2); Mitsuba returns it as stored
         let theirs: Vec<Rgb> = theirs.iter().map(|v| v.map(|c| c.max(0.0))).collect();
@@ -213,6 +274,29 @@ fn exported_bsdf_files_render_in_mitsuba_as_the_report_shows_them() {
     let job = dir.path().join("job");
     common::run_small_job(&job, &[]);
     common::brdfmill_ok(&["export", job.to_str().unwrap()]);
+    // and a MERL target, whose file is parameterised by the half-angle distribution the job derived
+    let merl = dir.path().join("merl");
+    common::brdfmill_ok(&[
+        "run",
+        "examples/merl-gold.toml",
+        "--out",
+        merl.to_str().unwrap(),
+        "--set",
+        "facets.facets_x=6",
+        "--set",
+        "facets.facets_y=6",
+        "--set",
+        "toolpath.area_mm=[7.2,7.2]",
+    ]);
+    let exported = dir.path().join("merl-export");
+    std::fs::create_dir(&exported).unwrap();
+    common::brdfmill_ok(&["export", merl.to_str().unwrap(), "--out", exported.to_str().unwrap()]);
+    let gold = Brdf::parse(&format!("merl:{}", merl.join("beckmann-0.18-gold.binary").display())).unwrap();
+    check_written(
+        &exported.join("target.bsdf"),
+        &|a, b| gold.eval(a, b),
+        "MERL target.bsdf",
+    );
     let target = Brdf::parse("beckmann:alpha=0.2,material=aluminium").unwrap();
     let surface = |name: &str| MicrofacetBrdf::new(NdfFile::read(&job.join(name)).unwrap().target(), target.material);
     let (design, milled) = (surface("ndf-design.json"), surface("ndf-milled.json"));

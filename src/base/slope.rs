@@ -457,7 +457,8 @@ impl SmithTable {
         }
     }
 
-    /// `Λ(w)` by bilinear interpolation in `(θ, φ)`; infinite below the horizon.
+    /// `Λ(w)` by bilinear interpolation in `(θ, φ)`; beyond the table's last polar angle (89.5°) carried on
+    /// by `tanθ` as Λ's limit at the horizon requires ([`SmithTable::lambda_at`]); infinite below the horizon.
     pub fn lambda(&self, w: &Vec3) -> f64 {
         if w.z <= 0.0 {
             return f64::INFINITY;
@@ -468,7 +469,17 @@ impl SmithTable {
     /// `Λ` at a direction above the horizon whose angles were worked out once ([`TableDirection::of`]), for
     /// callers that look the same directions up in several tables.
     pub fn lambda_at(&self, dir: TableDirection) -> f64 {
-        let theta = dir.theta.min(self.theta_max);
+        if dir.theta > self.theta_max {
+            // toward the horizon (μ = cotθ → 0) Λ = (1/μ) ∫ (q − μ)⁺ P(q) dq → E[q⁺]/μ − P(q > 0), q the slope
+            // along φ: the table's last value carried on by tanθ, with P(q > 0) taken as ½ (a distribution
+            // centred on the normal); G1 → 0 at grazing, as masking requires
+            let edge = TableDirection {
+                theta: self.theta_max,
+                ..dir
+            };
+            return (self.lambda_at(edge) + 0.5) * dir.theta.tan().abs() / self.theta_max.tan() - 0.5;
+        }
+        let theta = dir.theta;
         let t = theta / self.theta_max * (self.nt - 1) as f64;
         let f = dir.phi / std::f64::consts::TAU * self.nphi as f64;
         let (t0, f0) = (t.floor() as usize, f.floor() as usize);
@@ -585,5 +596,26 @@ mod tests {
                 "θ={theta_deg}: {num} vs {exact}"
             );
         }
+    }
+
+    #[test]
+    fn smith_table_carries_lambda_to_the_horizon() {
+        // beyond the table's 89.5° its Λ follows tanθ, as Beckmann's closed form does there
+        // (Λ → α tanθ / (2√π) − ½ as θ → 90°), so that G1 → 0 at grazing
+        let alpha: f64 = 0.4;
+        let g = SlopeGrid::from_fn(SlopeDomain::square(200, 3.0), gaussian(alpha / 2f64.sqrt(), 0.0, 0.0));
+        let table = SmithTable::new(&g, 64, 32);
+        for theta_deg in [89.7f64, 89.9, 89.99] {
+            let w = crate::base::geometry::spherical(theta_deg.to_radians(), 0.7);
+            let a = 1.0 / (alpha * theta_deg.to_radians().tan());
+            let exact = (libm::erf(a) - 1.0) / 2.0 + (-a * a).exp() / (2.0 * a * std::f64::consts::PI.sqrt());
+            let table_l = table.lambda(&w);
+            assert!(
+                (table_l / exact - 1.0).abs() < 0.01,
+                "θ={theta_deg}: {table_l} vs {exact}"
+            );
+        }
+        let grazing = crate::base::geometry::spherical(std::f64::consts::FRAC_PI_2, 0.7);
+        assert!(table.g1(&grazing) < 1e-12, "G1 at grazing {}", table.g1(&grazing));
     }
 }
