@@ -58,6 +58,10 @@ pub struct RegistrationFigures {
     pub rotation_deg: f64,
     /// The translation, mm, in the scan's frame (the simulation's centre lands at the scan's centre plus it).
     pub shift_mm: [f64; 2],
+    /// The scan was read with its rows in reverse order (its instrument counts rows from the other edge)
+    /// before the rotation and translation.
+    #[serde(default)]
+    pub mirrored: bool,
     /// The scan's tilt against the simulated cut, removed, degrees.
     pub tilt_deg: f64,
     /// The height offset removed, µm.
@@ -172,6 +176,7 @@ pub fn compare(scan_path: &Path, job_out: &Path, out: &Path, cfg: &CompareConfig
     let figures = RegistrationFigures {
         rotation_deg: reg.pose.rotation_deg(),
         shift_mm: reg.pose.shift_mm,
+        mirrored: reg.pose.mirrored,
         tilt_deg: reg.tilt_deg,
         offset_um: reg.pose.plane[0] * 1e3,
         coarse_correlation: reg.coarse_correlation,
@@ -486,7 +491,15 @@ fn page(c: &Comparison, figures: &[Figure]) -> String {
         ("job".into(), format!("`{}`", c.job_dir)),
         (
             "rotation".into(),
-            format!("{:.3}° (the simulation's frame in the scan's)", r.rotation_deg),
+            format!(
+                "{:.3}° (the simulation's frame in the scan's){}",
+                r.rotation_deg,
+                if r.mirrored {
+                    "; the scan read mirrored (its rows in reverse order: its instrument counts them from the other edge)"
+                } else {
+                    ""
+                }
+            ),
         ),
         (
             "translation".into(),

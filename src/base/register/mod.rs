@@ -179,6 +179,18 @@ impl Grid {
         [a + b * (o[0] - h) + c * (o[1] - h), b, c]
     }
 
+    /// This grid with its rows in reverse order: the point at `y` moved to `ny·pitch − y` (a scan whose
+    /// instrument counts rows the other way).
+    pub fn mirrored(&self) -> Grid {
+        let mut g = self.clone();
+        for j in 0..self.ny {
+            let (to, from) = (j * self.nx, (self.ny - 1 - j) * self.nx);
+            g.z[to..to + self.nx].copy_from_slice(&self.z[from..from + self.nx]);
+            g.valid[to..to + self.nx].copy_from_slice(&self.valid[from..from + self.nx]);
+        }
+        g
+    }
+
     /// This grid less its least-squares plane.
     fn levelled(&self) -> Grid {
         let mut g = self.clone();
@@ -198,6 +210,10 @@ pub struct Pose {
     pub shift_mm: [f64; 2],
     /// The plane `(p₀ mm, p₁, p₂)` of the scan's heights over the simulation's.
     pub plane: [f64; 3],
+    /// The scan was read mirrored ([`Grid::mirrored`]) before the rotation: its instrument counts rows the
+    /// other way.
+    #[serde(default)]
+    pub mirrored: bool,
 }
 
 impl Pose {
@@ -312,47 +328,34 @@ pub fn register(sim: &Grid, scan: &Grid, slope_step_mm: f64) -> Result<Registere
             points: scan_c.valid_count(),
         });
     }
-    let mut searcher = search::Searcher::new(&sim_c, &scan_c, centres);
-    let steps = (2.0 * MAX_ANGLE_DEG) as i32;
-    let mut found: Vec<search::Found> = (0..4u8)
-        .flat_map(|k| (0..=steps).map(move |a| (k, -MAX_ANGLE_DEG + a as f64)))
-        .filter_map(|(k, angle)| searcher.best(k, angle))
-        .collect();
-    found.sort_by(|a, b| b.ncc.total_cmp(&a.ncc));
-    // the best few distinct peaks, each refined on the two coarsest levels and judged by the rms height
-    // difference left there: a scan of part of the part can correlate best, coarsely, at a wrong pose (the
-    // relief's long waves), which its detail then refutes
-    let mut picks: Vec<search::Found> = vec![];
-    for f in found {
-        if picks.len() == CANDIDATES {
-            break;
-        }
-        if picks.iter().all(|p| distinct(&p.pose, &f.pose, sim_c.pitch_mm)) {
-            picks.push(f);
-        }
-    }
-    if picks.is_empty() {
-        return Err(RegisterError::NoOverlap);
-    }
-    let min_cells = search::MIN_OVERLAP * sim.valid_count().min(level.valid_count()) as f64;
     let half = (top / 2).max(1);
-    let (sim_h, scan_h) = (sim.coarsen(half), level.coarsen(half));
-    let judged: Vec<(Pose, f64, f64)> = picks
-        .iter()
-        .map(|f| {
-            let p = refine(&sim_c, &scan_c, centres, f.pose, ITERATIONS);
-            let p = refine(&sim_h, &scan_h, centres, p, ITERATIONS);
-            let (rms, cells) = rms_left(&sim_h, &scan_h, centres, &p);
-            let enough = cells as f64 * (half * half) as f64 >= min_cells;
-            (p, if enough { rms } else { f64::INFINITY }, f.ncc)
-        })
-        .collect();
-    let (mut pose, _, ncc) = judged
-        .iter()
-        .copied()
-        .filter(|j| j.1.is_finite())
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .ok_or(RegisterError::NoOverlap)?;
+    let sim_h = sim.coarsen(half);
+    let search_at = Coarse {
+        sim_c: &sim_c,
+        sim_h: &sim_h,
+        centres,
+        half,
+        min_cells: search::MIN_OVERLAP * sim.valid_count().min(level.valid_count()) as f64,
+    };
+    // the scan as given, and mirrored: the mirrored reading is taken only when it leaves under half the
+    // height difference the scan as given does (a part with a mirror symmetry registers either way; at every
+    // wrong pose a mirrored scan of an asymmetric part leaves the relief's whole amplitude)
+    let mirrored_level = level.mirrored();
+    let given = search_at.pick(&scan_c, &level.coarsen(half));
+    let mirror = search_at.pick(&mirrored_level.coarsen(top), &mirrored_level.coarsen(half));
+    let mirrored = match (&given, &mirror) {
+        (Some(g), Some(m)) => m.rms_mm < 0.5 * g.rms_mm,
+        (None, Some(_)) => true,
+        (_, None) => false,
+    };
+    let chosen = if mirrored { mirror } else { given }.ok_or(RegisterError::NoOverlap)?;
+    let (level, raw) = if mirrored {
+        (mirrored_level, raw.mirrored())
+    } else {
+        (level, raw)
+    };
+    let (mut pose, ncc) = (chosen.pose, chosen.ncc);
+    pose.mirrored = mirrored;
     let mut f = (half / 2).max(1);
     loop {
         let (s, c) = if f > 1 {
@@ -368,6 +371,64 @@ pub fn register(sim: &Grid, scan: &Grid, slope_step_mm: f64) -> Result<Registere
     }
     let coarse = search::Found { pose, ncc };
     Ok(finish(sim, &raw, pose, coarse.ncc, slope_step_mm))
+}
+
+/// The coarse search's shared pieces: the simulated cut at the coarsest level and at the next, the grids'
+/// centres, the next level's factor and the least overlap, in full-resolution cells.
+struct Coarse<'a> {
+    sim_c: &'a Grid,
+    sim_h: &'a Grid,
+    centres: ([f64; 2], [f64; 2]),
+    half: usize,
+    min_cells: f64,
+}
+
+/// A coarse pose refined on the two coarsest levels, with the rms height difference it leaves there (mm) and
+/// its correlation peak.
+struct Judged {
+    pose: Pose,
+    rms_mm: f64,
+    ncc: f64,
+}
+
+impl Coarse<'_> {
+    /// The best pose of a (levelled) scan given at the coarsest level (`scan_c`) and the next (`scan_h`):
+    /// for every quarter turn and small angle the correlation peak; the best few distinct peaks each refined
+    /// on the two levels and judged by the rms height difference left on the second (a scan of part of the
+    /// part can correlate best, coarsely, at a wrong pose — the relief's long waves — which its detail then
+    /// refutes). `None` when no peak overlaps enough.
+    fn pick(&self, scan_c: &Grid, scan_h: &Grid) -> Option<Judged> {
+        let mut searcher = search::Searcher::new(self.sim_c, scan_c, self.centres);
+        let steps = (2.0 * MAX_ANGLE_DEG) as i32;
+        let mut found: Vec<search::Found> = (0..4u8)
+            .flat_map(|k| (0..=steps).map(move |a| (k, -MAX_ANGLE_DEG + a as f64)))
+            .filter_map(|(k, angle)| searcher.best(k, angle))
+            .collect();
+        found.sort_by(|a, b| b.ncc.total_cmp(&a.ncc));
+        let mut picks: Vec<search::Found> = vec![];
+        for f in found {
+            if picks.len() == CANDIDATES {
+                break;
+            }
+            if picks.iter().all(|p| distinct(&p.pose, &f.pose, self.sim_c.pitch_mm)) {
+                picks.push(f);
+            }
+        }
+        let area = (self.half * self.half) as f64;
+        picks
+            .iter()
+            .filter_map(|f| {
+                let p = refine(self.sim_c, scan_c, self.centres, f.pose, ITERATIONS);
+                let p = refine(self.sim_h, scan_h, self.centres, p, ITERATIONS);
+                let (rms_mm, cells) = rms_left(self.sim_h, scan_h, self.centres, &p);
+                (cells as f64 * area >= self.min_cells && rms_mm.is_finite()).then_some(Judged {
+                    pose: p,
+                    rms_mm,
+                    ncc: f.ncc,
+                })
+            })
+            .min_by(|a, b| a.rms_mm.total_cmp(&b.rms_mm))
+    }
 }
 
 /// Two coarse poses that are not the same peak: another quarter turn, more than 2.5° apart (a peak is seen

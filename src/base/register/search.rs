@@ -90,6 +90,7 @@ impl<'a> Searcher<'a> {
             angle_deg,
             shift_mm: [0.0; 2],
             plane: [0.0; 3],
+            mirrored: false,
         };
         let (g, origin) = self.rotated(&pose);
         let (lx, ly) = self.size;

@@ -80,6 +80,7 @@ fn a_turned_shifted_tilted_noisy_scan_registers_to_the_pose_that_made_it() {
     ] {
         let sc = scan(400, 0.01, phi, t, [tilt * 0.6, tilt * 0.8], 0.2);
         let r = register(&sim, &sc, 0.02).expect("registers");
+        assert!(!r.pose.mirrored, "a scan as made is not read mirrored");
         let err_phi = (r.pose.rotation_deg() - phi + 540.0).rem_euclid(360.0) - 180.0;
         assert!(err_phi.abs() < 0.02, "rotation {} for {phi}", r.pose.rotation_deg());
         for a in 0..2 {
@@ -143,6 +144,44 @@ fn a_scan_of_a_far_corner_of_the_part_registers() {
             r.residual_rms_um
         );
         assert!(r.slope_correlation > 0.99, "slopes agree {}", r.slope_correlation);
+    }
+}
+
+#[test]
+fn a_scan_whose_rows_run_the_other_way_registers_mirrored() {
+    // an instrument that counts rows from the other edge: the scan made as above, its rows reversed;
+    // registration reads it mirrored and finds what it finds for the scan as made, and the pose that made it
+    let sim = sim();
+    let tilt = 0.5f64.to_radians().tan();
+    for (n, phi, t) in [
+        (400, 93.0, [0.4, -0.3]),
+        (400, -2.0, [0.0, 0.0]),
+        (120, 0.0, [0.9, 0.9]),
+    ] {
+        let sc = scan(n, 0.01, phi, t, [tilt * 0.6, 0.0], 0.2);
+        let (r0, r) = (
+            register(&sim, &sc, 0.02).expect("registers"),
+            register(&sim, &sc.mirrored(), 0.02).expect("registers"),
+        );
+        assert!(r.pose.mirrored && !r0.pose.mirrored, "read mirrored at {phi}°");
+        let err_phi = (r.pose.rotation_deg() - phi + 540.0).rem_euclid(360.0) - 180.0;
+        assert!(err_phi.abs() < 0.05, "rotation {} for {phi}", r.pose.rotation_deg());
+        assert!(
+            (0..2).all(|a| (r.pose.shift_mm[a] - t[a]).abs() < 2e-3),
+            "shift {:?} for {t:?}",
+            r.pose.shift_mm
+        );
+        assert!(r.residual_rms_um < 0.5, "residual {} µm", r.residual_rms_um);
+        for (what, a, b) in [
+            ("residual", r.residual_rms_um, r0.residual_rms_um),
+            ("slope agreement", r.slope_correlation, r0.slope_correlation),
+            ("coverage", r.coverage, r0.coverage),
+        ] {
+            assert!(
+                (a - b).abs() < 1e-3 * b.abs().max(1.0),
+                "{what}: {a} mirrored, {b} as made ({n} points at {phi}°)"
+            );
+        }
     }
 }
 
