@@ -408,7 +408,9 @@ fn write(
         "Scan − simulated cut",
         format!(
             "The registered scan less the simulated cut, µm, where the scan covers the part (grey: not covered), on a scale of ±3 rms; the scan's tilt ({:.3}°) and offset ({:.1} µm) against the cut are removed. RMS {:.2} µm.",
-            c.registration.tilt_deg, c.registration.offset_um, c.registration.residual_rms_um
+            unsigned_zero(c.registration.tilt_deg, 3),
+            unsigned_zero(c.registration.offset_um, 1),
+            c.registration.residual_rms_um
         ),
         &diff,
     )];
@@ -503,8 +505,11 @@ fn page(c: &Comparison, figures: &[Figure]) -> String {
         ),
         (
             "translation".into(),
-            // + 0.0: a negative zero prints without its sign
-            format!("{:.4}, {:.4} mm", r.shift_mm[0] + 0.0, r.shift_mm[1] + 0.0),
+            format!(
+                "{:.4}, {:.4} mm",
+                unsigned_zero(r.shift_mm[0], 4),
+                unsigned_zero(r.shift_mm[1], 4)
+            ),
         ),
         ("tilt removed".into(), format!("{:.3}°", r.tilt_deg)),
         (
@@ -553,4 +558,10 @@ fn page(c: &Comparison, figures: &[Figure]) -> String {
         h.push_str(&report::figure_html(f));
     }
     report::page("brdfmill compare", &format!("scan of `{}`", c.job_dir), &h)
+}
+
+/// `v` rounded to `decimals` places, a zero without its sign (so that −0.00001 prints as 0.0000, not −0.0000).
+fn unsigned_zero(v: f64, decimals: i32) -> f64 {
+    let scale = 10f64.powi(decimals);
+    (v * scale).round() / scale + 0.0
 }
