@@ -274,24 +274,20 @@ fn exported_bsdf_files_render_in_mitsuba_as_the_report_shows_them() {
     let job = dir.path().join("job");
     common::run_small_job(&job, &[]);
     common::brdfmill_ok(&["export", job.to_str().unwrap()]);
-    // and a MERL target, whose file is parameterised by the half-angle distribution the job derived
+    // and a MERL target, whose file is parameterised by the half-angle distribution the job derived (with
+    // a floor): a MERL table written here from Beckmann α 0.18 with gold's Fresnel, read as the job's target
+    let table = dir.path().join("gold.binary");
+    let model = Brdf::parse("beckmann:alpha=0.18,material=gold").unwrap();
+    brdfmill::stages::brdf::Merl::from_fn(|a, b| model.eval(a, b))
+        .write(&table)
+        .unwrap();
     let merl = dir.path().join("merl");
-    common::brdfmill_ok(&[
-        "run",
-        "examples/merl-gold.toml",
-        "--out",
-        merl.to_str().unwrap(),
-        "--set",
-        "facets.facets_x=6",
-        "--set",
-        "facets.facets_y=6",
-        "--set",
-        "toolpath.area_mm=[7.2,7.2]",
-    ]);
+    let spec = format!("merl:{},material=gold", table.display());
+    common::run_small_job(&merl, &[&format!("target.brdf=\"{spec}\"")]);
     let exported = dir.path().join("merl-export");
     std::fs::create_dir(&exported).unwrap();
     common::brdfmill_ok(&["export", merl.to_str().unwrap(), "--out", exported.to_str().unwrap()]);
-    let gold = Brdf::parse(&format!("merl:{}", merl.join("beckmann-0.18-gold.binary").display())).unwrap();
+    let gold = Brdf::parse(&spec).unwrap();
     check_written(
         &exported.join("target.bsdf"),
         &|a, b| gold.eval(a, b),

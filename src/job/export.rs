@@ -8,7 +8,8 @@
 //!
 //! An RGL file is parameterised by an NDF: the design's and the milled surface's are theirs; the target's is
 //! its own where the model has one (analytic models, RGL, drawn highlights, scans) and otherwise (MERL) the
-//! half-angle distribution the job derived from its reflectance (`ndf.json`'s `observed`).
+//! half-angle distribution the job derived from its reflectance (`ndf.json`'s `observed`) with a uniform floor
+//! ([`crate::stages::brdf::rgl_write::with_floor`]), so that reflection beyond its slope grid's cone is kept.
 //!
 //! The design's and the milled surface's BRDFs are the report's: the microfacet BRDF (Eq. 5) of the NDF the
 //! verdict measured (`ndf-design.json`, `ndf-milled.json`), its Smith masking from the same grid, with the
@@ -17,7 +18,7 @@
 use super::{JobError, StageError};
 use crate::base::geometry::Vec3;
 use crate::stages::brdf::merl::Merl;
-use crate::stages::brdf::rgl_write::{write_rgl, RglSource};
+use crate::stages::brdf::rgl_write::{with_floor, write_rgl, RglSource};
 use crate::stages::ndf::NdfFile;
 use crate::stages::optics::geometric::MicrofacetBrdf;
 use std::path::{Path, PathBuf};
@@ -54,8 +55,9 @@ pub fn export(job_out: &Path, out: &Path) -> Result<Vec<(PathBuf, String)>, JobE
         let f = NdfFile::read(&job_out.join("ndf.json")).map_err(|e| input(e.to_string()))?;
         Some(MicrofacetBrdf::new(f.observed(), None))
     };
+    let observed_d = with_floor(|m: &Vec3| observed.as_ref().map_or(0.0, |o| o.d(m)));
     let target_d = |m: &Vec3| match &observed {
-        Some(o) => o.d(m),
+        Some(_) => observed_d(m),
         None => target.known_ndf(m).unwrap_or(0.0),
     };
     let mut written = vec![];

@@ -265,6 +265,18 @@ pub fn encode_rgl(src: &RglSource) -> Vec<u8> {
     ])
 }
 
+/// The share of a parameterising NDF given to a uniform floor by [`with_floor`].
+pub const FLOOR_SHARE: f64 = 0.05;
+
+/// `(1 − ε) D(m) + ε / π`, ε = [`FLOOR_SHARE`]: an NDF to parameterise a file by when `D` is only the half-angle
+/// distribution of a measured reflectance (a MERL target's). A file's reflectance reaches a reader only where
+/// its NDF is non-zero (`f cosθo = rgb · D / 4σ`), and such a `D` is zero beyond its slope grid's cone, where
+/// the measurement may still reflect (a diffuse part); `1/π` is the uniform NDF (`∫ cosθ/π dω = 1`), so the
+/// sum stays normalised when `D` is.
+pub fn with_floor(d: impl Fn(&Vec3) -> f64 + Sync) -> impl Fn(&Vec3) -> f64 + Sync {
+    move |m| (1.0 - FLOOR_SHARE) * d(m) + if m.z > 0.0 { FLOOR_SHARE / PI } else { 0.0 }
+}
+
 /// Write `src` as an RGL `.bsdf` file at `path` (atomically).
 pub fn write_rgl(path: &Path, src: &RglSource) -> Result<(), crate::base::io::WriteError> {
     crate::base::io::write_atomic(path, &encode_rgl(src))
@@ -409,6 +421,48 @@ mod tests {
                 assert!(exact < 1.0 && mean < 1.0, "{at}: mean reflectance {mean}");
             }
         }
+    }
+
+    /// A measured reflectance with a diffuse part, parameterised by the half-angle distribution of its lobe
+    /// cut at a slope grid's cone (what a MERL target's job derives): without a floor the file loses every
+    /// reflection whose half vector lies beyond the cone; with [`with_floor`] it keeps them.
+    #[test]
+    fn a_floor_keeps_the_reflectance_beyond_the_cone() {
+        let lobe = Brdf::parse("beckmann:alpha=0.2,material=aluminium").unwrap();
+        let f = |wi: &Vec3, wo: &Vec3| lobe.eval(wi, wo).map(|c| c + 0.05 / PI);
+        let cone = 40f64.to_radians().cos();
+        let cut = |m: &Vec3| if m.z >= cone { lobe.known_ndf(m).unwrap() } else { 0.0 };
+        let floored = with_floor(cut);
+        let l1 = |d: &(dyn Fn(&Vec3) -> f64 + Sync)| {
+            let src = RglSource {
+                description: String::new(),
+                ndf: d,
+                brdf: &f,
+            };
+            let r = RglBsdf::from_bytes(&encode_rgl(&src)).unwrap();
+            let (mut num, mut den, mut s) = (0.0, 0.0, 5u64);
+            let mut next = move || {
+                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                (s >> 11) as f64 / (1u64 << 53) as f64
+            };
+            for _ in 0..20000 {
+                let wi = spherical((0.0087 + 0.9913 * next()).acos(), TAU * next());
+                let wo = spherical((0.0087 + 0.9913 * next()).acos(), TAU * next());
+                let (a, c) = (f(&wi, &wo), r.eval(&wi, &wo));
+                for k in 0..3 {
+                    num += (a[k] - c[k]).abs() * wo.z;
+                    den += a[k] * wo.z;
+                }
+            }
+            num / den
+        };
+        let (bare, with) = (l1(&cut), l1(&floored));
+        eprintln!("relative L1: {bare} without a floor, {with} with it");
+        assert!(with < 0.02, "with a floor: relative L1 {with}");
+        assert!(
+            bare > 2.0 * with,
+            "without a floor the file should lose the reflectance beyond the cone: {bare}"
+        );
     }
 
     #[test]
