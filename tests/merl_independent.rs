@@ -298,30 +298,17 @@ fn phi_d_and_its_mirror_are_told_apart() {
 #[test]
 #[ignore = "slow: runs a job (about 10 s) and writes three 33 MB tables"]
 fn export_writes_the_target_and_milled_brdfs_in_merls_layout() {
-    use brdfmill::stages::brdf::Brdf;
-    use brdfmill::stages::ndf::NdfFile;
-    use brdfmill::stages::optics::geometric::MicrofacetBrdf;
     let dir = tempfile::tempdir().unwrap();
     let job = dir.path().join("job");
     let spec = "beckmann:alpha=0.2,material=aluminium";
     common::run_small_job(&job, &[]);
     common::brdfmill_ok(&["export", job.to_str().unwrap()]);
-    let target = Brdf::parse(spec).unwrap();
-    let surface = |name: &str| MicrofacetBrdf::new(NdfFile::read(&job.join(name)).unwrap().target(), target.material);
-    let (design, milled) = (surface("ndf-design.json"), surface("ndf-milled.json"));
+    let brdfs = common::JobBrdfs::read(&job, spec);
     let scale = [1.0 / 1500.0, 1.15 / 1500.0, 1.66 / 1500.0];
     let n = NH * ND * NP;
-    type Brdf3<'a> = &'a dyn Fn(&Vec3, &Vec3) -> [f64; 3];
-    let target_f = |a: &Vec3, b: &Vec3| target.eval(a, b);
-    let design_f = |a: &Vec3, b: &Vec3| design.eval(a, b);
-    let milled_f = |a: &Vec3, b: &Vec3| milled.eval(a, b);
-    let files: [(&str, Brdf3); 3] = [
-        ("target.binary", &target_f),
-        ("design.binary", &design_f),
-        ("milled.binary", &milled_f),
-    ];
-    for (file, f) in files {
-        let bytes = std::fs::read(job.join(file)).unwrap();
+    for (stem, f) in brdfs.each() {
+        let file = format!("{stem}.binary");
+        let bytes = std::fs::read(job.join(&file)).unwrap();
         let int = |k: usize| i32::from_le_bytes(bytes[4 * k..4 * k + 4].try_into().unwrap());
         assert_eq!(
             (int(0), int(1), int(2)),

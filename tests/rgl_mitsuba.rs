@@ -268,8 +268,6 @@ fn an_analytic_brdf_written_as_rgl_renders_in_mitsuba() {
 #[test]
 #[ignore = "needs Mitsuba 3 (pip install mitsuba); runs a job (about 10 s)"]
 fn exported_bsdf_files_render_in_mitsuba_as_the_report_shows_them() {
-    use brdfmill::stages::ndf::NdfFile;
-    use brdfmill::stages::optics::geometric::MicrofacetBrdf;
     let dir = tempfile::tempdir().unwrap();
     let job = dir.path().join("job");
     common::run_small_job(&job, &[]);
@@ -293,18 +291,9 @@ fn exported_bsdf_files_render_in_mitsuba_as_the_report_shows_them() {
         &|a, b| gold.eval(a, b),
         "MERL target.bsdf",
     );
-    let target = Brdf::parse("beckmann:alpha=0.2,material=aluminium").unwrap();
-    let surface = |name: &str| MicrofacetBrdf::new(NdfFile::read(&job.join(name)).unwrap().target(), target.material);
-    let (design, milled) = (surface("ndf-design.json"), surface("ndf-milled.json"));
-    let target_f = |a: &Vec3, b: &Vec3| target.eval(a, b);
-    let design_f = |a: &Vec3, b: &Vec3| design.eval(a, b);
-    let milled_f = |a: &Vec3, b: &Vec3| milled.eval(a, b);
-    let files: [(&str, BrdfFn); 3] = [
-        ("target.bsdf", &target_f),
-        ("design.bsdf", &design_f),
-        ("milled.bsdf", &milled_f),
-    ];
-    for (name, f) in files {
-        check_written(&job.join(name), f, name);
+    let brdfs = common::JobBrdfs::read(&job, "beckmann:alpha=0.2,material=aluminium");
+    for (stem, f) in brdfs.each() {
+        let name = format!("{stem}.bsdf");
+        check_written(&job.join(&name), &*f, &name);
     }
 }

@@ -581,6 +581,12 @@ mod tests {
         }
     }
 
+    /// Beckmann's Smith Λ in closed form, `a = 1/(α tanθ)`: `(erf a − 1)/2 + exp(−a²)/(2a√π)`.
+    fn beckmann_lambda(alpha: f64, theta: f64) -> f64 {
+        let a = 1.0 / (alpha * theta.tan());
+        (libm::erf(a) - 1.0) / 2.0 + (-a * a).exp() / (2.0 * a * std::f64::consts::PI.sqrt())
+    }
+
     #[test]
     fn smith_lambda_matches_beckmann_closed_form() {
         // An isotropic Gaussian of slope variance α²/2 is the Beckmann distribution; its Λ has a closed form.
@@ -588,8 +594,7 @@ mod tests {
         let g = SlopeGrid::from_fn(SlopeDomain::square(400, 3.0), gaussian(alpha / 2f64.sqrt(), 0.0, 0.0));
         for theta_deg in [30.0f64, 60.0, 75.0] {
             let w = crate::base::geometry::spherical(theta_deg.to_radians(), 0.7);
-            let a = 1.0 / (alpha * theta_deg.to_radians().tan());
-            let exact = (libm::erf(a) - 1.0) / 2.0 + (-a * a).exp() / (2.0 * a * std::f64::consts::PI.sqrt());
+            let exact = beckmann_lambda(alpha, theta_deg.to_radians());
             let num = g.smith_lambda(&w);
             assert!(
                 (num - exact).abs() < 1e-3 * exact.max(1e-2),
@@ -607,8 +612,7 @@ mod tests {
         let table = SmithTable::new(&g, 64, 32);
         for theta_deg in [89.7f64, 89.9, 89.99] {
             let w = crate::base::geometry::spherical(theta_deg.to_radians(), 0.7);
-            let a = 1.0 / (alpha * theta_deg.to_radians().tan());
-            let exact = (libm::erf(a) - 1.0) / 2.0 + (-a * a).exp() / (2.0 * a * std::f64::consts::PI.sqrt());
+            let exact = beckmann_lambda(alpha, theta_deg.to_radians());
             let table_l = table.lambda(&w);
             assert!(
                 (table_l / exact - 1.0).abs() < 0.01,

@@ -55,17 +55,18 @@ pub fn export(job_out: &Path, out: &Path) -> Result<Vec<(PathBuf, String)>, JobE
         let f = NdfFile::read(&job_out.join("ndf.json")).map_err(|e| input(e.to_string()))?;
         Some(MicrofacetBrdf::new(f.observed(), None))
     };
-    let observed_d = with_floor(|m: &Vec3| observed.as_ref().map_or(0.0, |o| o.d(m)));
-    let target_d = |m: &Vec3| match &observed {
-        Some(_) => observed_d(m),
-        None => target.known_ndf(m).unwrap_or(0.0),
+    let own = |m: &Vec3| target.known_ndf(m).unwrap_or(0.0);
+    let floored = observed.as_ref().map(|o| with_floor(move |m: &Vec3| o.d(m)));
+    let target_d: &NdfFn = match &floored {
+        Some(d) => d,
+        None => &own,
     };
     let mut written = vec![];
     let tables: [(&str, &BrdfFn, &NdfFn, String); 3] = [
         (
             "target",
             &|a, b| target.eval(a, b),
-            &target_d,
+            target_d,
             format!("the target `{}`", target.spec),
         ),
         (

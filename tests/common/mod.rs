@@ -51,3 +51,36 @@ pub fn run_small_job(out: &Path, sets: &[&str]) {
     }
     brdfmill_ok(&args);
 }
+
+/// A BRDF `f(wi, wo)` in RGB, without the cosine.
+pub type BrdfBox<'a> = Box<dyn Fn(&brdfmill::base::geometry::Vec3, &brdfmill::base::geometry::Vec3) -> [f64; 3] + 'a>;
+
+/// The BRDFs `brdfmill export` writes for a job's output folder: the target, and the report's design and
+/// milled BRDFs (the microfacet BRDFs of `ndf-design.json` and `ndf-milled.json` with the target's material).
+pub struct JobBrdfs {
+    pub target: brdfmill::stages::brdf::Brdf,
+    pub design: brdfmill::stages::optics::geometric::MicrofacetBrdf,
+    pub milled: brdfmill::stages::optics::geometric::MicrofacetBrdf,
+}
+
+impl JobBrdfs {
+    /// Read from the output folder `job` of a job whose target is `spec`.
+    pub fn read(job: &Path, spec: &str) -> Self {
+        use brdfmill::stages::ndf::NdfFile;
+        use brdfmill::stages::optics::geometric::MicrofacetBrdf;
+        let target = brdfmill::stages::brdf::Brdf::parse(spec).unwrap();
+        let surface =
+            |name: &str| MicrofacetBrdf::new(NdfFile::read(&job.join(name)).unwrap().target(), target.material);
+        let (design, milled) = (surface("ndf-design.json"), surface("ndf-milled.json"));
+        Self { target, design, milled }
+    }
+
+    /// Each with the stem of its exported files: `target`, `design`, `milled`.
+    pub fn each(&self) -> [(&'static str, BrdfBox<'_>); 3] {
+        [
+            ("target", Box::new(|a, b| self.target.eval(a, b))),
+            ("design", Box::new(|a, b| self.design.eval(a, b))),
+            ("milled", Box::new(|a, b| self.milled.eval(a, b))),
+        ]
+    }
+}

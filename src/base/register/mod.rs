@@ -369,8 +369,7 @@ pub fn register(sim: &Grid, scan: &Grid, slope_step_mm: f64) -> Result<Registere
         }
         f /= 2;
     }
-    let coarse = search::Found { pose, ncc };
-    Ok(finish(sim, &raw, pose, coarse.ncc, slope_step_mm))
+    Ok(finish(sim, &raw, pose, ncc, slope_step_mm))
 }
 
 /// The coarse search's shared pieces: the simulated cut at the coarsest level and at the next, the grids'

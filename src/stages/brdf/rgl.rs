@@ -24,10 +24,10 @@ use std::path::Path;
 
 /// A bilinear grid over `[0, 1]²` with `nx × ny` vertices (x the fast axis).
 #[derive(Clone, Debug)]
-struct Grid2 {
-    nx: usize,
-    ny: usize,
-    v: Vec<f64>,
+pub(super) struct Grid2 {
+    pub(super) nx: usize,
+    pub(super) ny: usize,
+    pub(super) v: Vec<f64>,
 }
 
 /// Cell index and fraction of a coordinate in `[0, 1]` on `n` vertices.
@@ -39,6 +39,13 @@ fn cell(u: f64, n: usize) -> (usize, f64) {
 }
 
 impl Grid2 {
+    /// The value at a direction's grid coordinate, `(θ, φ)` parameterised as [`uv`] does (an `ndf` or
+    /// `sigma` grid, `[φ, θ]` in the file).
+    pub(super) fn at(&self, w: &Vec3) -> f64 {
+        let (u, v) = uv(w);
+        self.eval(u, v)
+    }
+
     fn eval(&self, x: f64, y: f64) -> f64 {
         let (i, fx) = cell(x, self.nx);
         let (j, fy) = cell(y, self.ny);
@@ -109,6 +116,12 @@ fn theta2u(theta: f64) -> f64 {
 #[inline]
 fn phi2u(phi: f64) -> f64 {
     (phi + PI) / TAU
+}
+
+/// A direction's grid coordinate `(√(θ / (π/2)), (φ + π) / 2π)`, `φ` in `[−π, π]`.
+pub(super) fn uv(w: &Vec3) -> (f64, f64) {
+    let (t, p) = RglBsdf::angles(w);
+    (theta2u(t), phi2u(p))
 }
 
 /// Linear interpolation weights over a sorted parameter list.
@@ -255,14 +268,12 @@ impl RglBsdf {
         if wm.z <= 0.0 {
             return 0.0;
         }
-        let (t, p) = Self::angles(wm);
-        self.ndf.eval(theta2u(t), phi2u(p)).max(0.0)
+        self.ndf.at(wm).max(0.0)
     }
 
     /// The stored projected area `σ(w) = cosθ / G1(w)`.
     pub fn sigma(&self, w: &Vec3) -> f64 {
-        let (t, p) = Self::angles(w);
-        self.sigma.eval(theta2u(t), phi2u(p))
+        self.sigma.at(w)
     }
 
     /// `f(wi, wo)` in RGB (without the cosine), negatives clipped.

@@ -22,7 +22,7 @@
 //!
 //! Incident directions: the 12 polar angles of [`THETA_I_DEG`] (0° to 89°), 13 azimuths 30° apart.
 
-use super::rgl::Warp;
+use super::rgl::{Grid2, Warp};
 use super::tensor::{encode, Values};
 use super::{luminance, Rgb};
 use crate::base::geometry::{spherical, Vec3};
@@ -74,42 +74,17 @@ fn direction(u: f64, v: f64) -> Vec3 {
     spherical(u2theta(u), v2phi(v))
 }
 
-/// A bilinear grid over `[0, 1]²`, `nx` vertices along `u` (the fast axis) and `ny` along `v`, as the file
-/// stores it (values rounded to `f32`).
-struct UvGrid {
-    nx: usize,
-    ny: usize,
-    v: Vec<f32>,
-}
-
-impl UvGrid {
-    fn from_fn(nx: usize, ny: usize, f: impl Fn(&Vec3) -> f64 + Sync) -> Self {
-        let v = (0..nx * ny)
-            .into_par_iter()
-            .map(|k| {
-                let (x, y) = (k % nx, k / nx);
-                f(&direction(x as f64 / (nx - 1) as f64, y as f64 / (ny - 1) as f64)) as f32
-            })
-            .collect();
-        Self { nx, ny, v }
-    }
-
-    /// Bilinear value at a direction (above the horizon).
-    fn at(&self, w: &Vec3) -> f64 {
-        let (c, s) = crate::base::geometry::cos_sin_phi(w);
-        let theta = w.z.clamp(-1.0, 1.0).acos();
-        let u = (theta / FRAC_PI_2).sqrt();
-        let v = (s.atan2(c) + PI) / TAU;
-        let cell = |t: f64, n: usize| {
-            let x = t.clamp(0.0, 1.0) * (n - 1) as f64;
-            let i = (x.floor() as usize).min(n - 2);
-            (i, x - i as f64)
-        };
-        let ((i, fx), (j, fy)) = (cell(u, self.nx), cell(v, self.ny));
-        let at = |a: usize, b: usize| self.v[b * self.nx + a] as f64;
-        (1.0 - fy) * ((1.0 - fx) * at(i, j) + fx * at(i + 1, j))
-            + fy * ((1.0 - fx) * at(i, j + 1) + fx * at(i + 1, j + 1))
-    }
+/// The grid of `f` at `nx` vertices along `u` (the fast axis) and `ny` along `v`, as the file stores it
+/// (values rounded to `f32`) and a reader interpolates it.
+fn grid(nx: usize, ny: usize, f: impl Fn(&Vec3) -> f64 + Sync) -> Grid2 {
+    let v = (0..nx * ny)
+        .into_par_iter()
+        .map(|k| {
+            let (x, y) = (k % nx, k / nx);
+            f(&direction(x as f64 / (nx - 1) as f64, y as f64 / (ny - 1) as f64)) as f32 as f64
+        })
+        .collect();
+    Grid2 { nx, ny, v }
 }
 
 /// The incident polar angles, radians.
@@ -123,7 +98,7 @@ pub fn phi_i() -> Vec<f64> {
 }
 
 /// The projected area `σ(w) = ∫ D(m) ⟨m, w⟩⁺ dm` on the `sigma` grid, by the midpoint rule over `(u, v)`.
-fn projected_area(ndf: &(dyn Fn(&Vec3) -> f64 + Sync)) -> UvGrid {
+fn projected_area(ndf: &(dyn Fn(&Vec3) -> f64 + Sync)) -> Grid2 {
     let n = SIGMA_CELLS;
     let nodes: Vec<(Vec3, f64)> = (0..n * n)
         .into_par_iter()
@@ -135,7 +110,7 @@ fn projected_area(ndf: &(dyn Fn(&Vec3) -> f64 + Sync)) -> UvGrid {
             (w > 0.0).then_some((m, w))
         })
         .collect();
-    UvGrid::from_fn(SIGMA_VERTICES, SIGMA_VERTICES, |w| {
+    grid(SIGMA_VERTICES, SIGMA_VERTICES, |w| {
         nodes.iter().map(|(m, d)| d * m.dot(w).max(0.0)).sum()
     })
 }
@@ -183,7 +158,7 @@ struct Slice {
     below: Vec<bool>,
 }
 
-fn slice(src: &RglSource, ndf: &UvGrid, sigma: &UvGrid, theta_i: f64, phi_i: f64) -> Slice {
+fn slice(src: &RglSource, ndf: &Grid2, sigma: &Grid2, theta_i: f64, phi_i: f64) -> Slice {
     let n = NDF_VERTICES;
     let wi = spherical(theta_i, phi_i);
     let vndf: Vec<f32> = (0..n * n)
@@ -191,7 +166,7 @@ fn slice(src: &RglSource, ndf: &UvGrid, sigma: &UvGrid, theta_i: f64, phi_i: f64
             let (x, y) = (k % n, k / n);
             let u = x as f64 / (n - 1) as f64;
             let m = direction(u, y as f64 / (n - 1) as f64);
-            let visible = ndf.v[k] as f64 * m.dot(&wi).max(0.0);
+            let visible = ndf.v[k] * m.dot(&wi).max(0.0);
             (visible * 2.0 * PI * PI * u * u2theta(u).sin()) as f32
         })
         .collect();
@@ -222,7 +197,7 @@ fn slice(src: &RglSource, ndf: &UvGrid, sigma: &UvGrid, theta_i: f64, phi_i: f64
 
 /// The bytes of the `.bsdf` file of `src`.
 pub fn encode_rgl(src: &RglSource) -> Vec<u8> {
-    let ndf = UvGrid::from_fn(NDF_VERTICES, NDF_VERTICES, |m| (src.ndf)(m).max(0.0));
+    let ndf = grid(NDF_VERTICES, NDF_VERTICES, |m| (src.ndf)(m).max(0.0));
     let sigma = projected_area(src.ndf);
     let (thetas, phis) = (theta_i(), phi_i());
     let slices: Vec<Slice> = (0..PHI_I * THETA_I)
@@ -252,8 +227,8 @@ pub fn encode_rgl(src: &RglSource) -> Vec<u8> {
         ("description", vec![description.len()], Values::U8(description)),
         ("phi_i", vec![PHI_I], f32s(&phis)),
         ("theta_i", vec![THETA_I], f32s(&thetas)),
-        ("sigma", vec![sigma.ny, sigma.nx], Values::F32(sigma.v)),
-        ("ndf", vec![ndf.ny, ndf.nx], Values::F32(ndf.v)),
+        ("sigma", vec![sigma.ny, sigma.nx], f32s(&sigma.v)),
+        ("ndf", vec![ndf.ny, ndf.nx], f32s(&ndf.v)),
         (
             "vndf",
             vec![PHI_I, THETA_I, NDF_VERTICES, NDF_VERTICES],
@@ -304,46 +279,63 @@ mod tests {
     /// Directions drawn with `cosθ` uniform in [`COS_MIN`, 1]: polar angles up to 89.5°.
     const COS_MIN: f64 = 0.0087;
 
+    /// The file of `f` parameterised by `d`.
+    fn file_with(
+        description: &str,
+        d: &(dyn Fn(&Vec3) -> f64 + Sync),
+        f: &(dyn Fn(&Vec3, &Vec3) -> Rgb + Sync),
+    ) -> Vec<u8> {
+        encode_rgl(&RglSource {
+            description: description.into(),
+            ndf: d,
+            brdf: f,
+        })
+    }
+
+    /// The file of an analytic BRDF, parameterised by its own NDF.
+    fn file_of(b: &Brdf, description: &str) -> Vec<u8> {
+        file_with(description, &|m| b.known_ndf(m).unwrap(), &|wi, wo| b.eval(wi, wo))
+    }
+
+    /// Relative L1 of `f cosθo` read back from `r` against `f`, over 20000 seeded direction pairs with
+    /// `cosθ` uniform in [`COS_MIN`, 1].
+    fn hemisphere_l1(f: &dyn Fn(&Vec3, &Vec3) -> Rgb, r: &RglBsdf) -> f64 {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
+        let mut dir = || {
+            spherical(
+                (COS_MIN + (1.0 - COS_MIN) * rng.gen::<f64>()).acos(),
+                rng.gen::<f64>() * TAU - PI,
+            )
+        };
+        let (mut num, mut den) = (0.0, 0.0);
+        for _ in 0..20000 {
+            let (wi, wo) = (dir(), dir());
+            let (a, c) = (f(&wi, &wo), r.eval(&wi, &wo));
+            for k in 0..3 {
+                num += (a[k] - c[k]).abs() * wo.z;
+                den += a[k] * wo.z;
+            }
+        }
+        num / den
+    }
+
     /// The file read back gives the BRDF it tabulates: relative L1 of `f cosθo` over direction pairs with
     /// polar angles up to 89.5° under 2%. Mitsuba reads these files as brdfmill's
     /// reader does (tests/rgl_mitsuba.rs), so this is what a renderer gets.
     #[test]
     fn the_file_read_back_gives_the_brdf() {
-        use rand::{Rng, SeedableRng};
         for spec in [
             "ggx:ax=0.15,ay=0.3,material=gold",
             "ggx:alpha=0.3,material=aluminium",
             "beckmann:alpha=0.1,material=aluminium",
         ] {
             let b = Brdf::parse(spec).unwrap();
-            let d = |m: &Vec3| b.known_ndf(m).unwrap();
-            let f = |wi: &Vec3, wo: &Vec3| b.eval(wi, wo);
-            let src = RglSource {
-                description: format!("{spec}\u{1}\n"),
-                ndf: &d,
-                brdf: &f,
-            };
-            let r = RglBsdf::from_bytes(&encode_rgl(&src)).unwrap();
+            let r = RglBsdf::from_bytes(&file_of(&b, &format!("{spec}\u{1}\n"))).unwrap();
             assert_eq!(r.description, spec, "description: printable ASCII only");
             assert_eq!((r.theta_i.len(), r.phi_i.len()), (THETA_I, PHI_I));
-            let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(3);
-            let mut dir = || {
-                spherical(
-                    (COS_MIN + (1.0 - COS_MIN) * rng.gen::<f64>()).acos(),
-                    rng.gen::<f64>() * TAU - PI,
-                )
-            };
-            let (mut num, mut den) = (0.0, 0.0);
-            for _ in 0..20000 {
-                let (wi, wo) = (dir(), dir());
-                let (a, c) = (b.eval(&wi, &wo), r.eval(&wi, &wo));
-                for k in 0..3 {
-                    num += (a[k] - c[k]).abs() * wo.z;
-                    den += a[k] * wo.z;
-                }
-            }
-            eprintln!("{spec}: relative L1 {}", num / den);
-            assert!(num / den < 0.02, "{spec}: relative L1 {}", num / den);
+            let l1 = hemisphere_l1(&|wi, wo| b.eval(wi, wo), &r);
+            assert!(l1 < 0.02, "{spec}: relative L1 {l1}");
         }
     }
 
@@ -352,14 +344,7 @@ mod tests {
     #[test]
     fn the_highlight_holds_toward_grazing() {
         let b = Brdf::parse("beckmann:alpha=0.2,material=aluminium").unwrap();
-        let d = |m: &Vec3| b.known_ndf(m).unwrap();
-        let f = |wi: &Vec3, wo: &Vec3| b.eval(wi, wo);
-        let src = RglSource {
-            description: String::new(),
-            ndf: &d,
-            brdf: &f,
-        };
-        let r = RglBsdf::from_bytes(&encode_rgl(&src)).unwrap();
+        let r = RglBsdf::from_bytes(&file_of(&b, "")).unwrap();
         // up to the last slice, 89°: beyond it a reader holds that slice (Mitsuba clamps its interpolation)
         // over the last 1.5e-4 of the cosine-weighted hemisphere
         for deg in [70.0, 78.0, 82.0, 84.0, 86.5, 88.0, 89.0] {
@@ -380,14 +365,7 @@ mod tests {
     #[test]
     fn each_slice_holds_the_directional_albedo() {
         let b = Brdf::parse("ggx:ax=0.15,ay=0.3,material=gold").unwrap();
-        let d = |m: &Vec3| b.known_ndf(m).unwrap();
-        let f = |wi: &Vec3, wo: &Vec3| b.eval(wi, wo);
-        let src = RglSource {
-            description: String::new(),
-            ndf: &d,
-            brdf: &f,
-        };
-        let bytes = encode_rgl(&src);
+        let bytes = file_of(&b, "");
         let r = RglBsdf::from_bytes(&bytes).unwrap();
         let tf = super::super::tensor::TensorFile::parse(&bytes).unwrap();
         let rgb = &tf.fields["rgb"].data;
@@ -433,29 +411,8 @@ mod tests {
         let cone = 40f64.to_radians().cos();
         let cut = |m: &Vec3| if m.z >= cone { lobe.known_ndf(m).unwrap() } else { 0.0 };
         let floored = with_floor(cut);
-        let l1 = |d: &(dyn Fn(&Vec3) -> f64 + Sync)| {
-            let src = RglSource {
-                description: String::new(),
-                ndf: d,
-                brdf: &f,
-            };
-            let r = RglBsdf::from_bytes(&encode_rgl(&src)).unwrap();
-            let (mut num, mut den, mut s) = (0.0, 0.0, 5u64);
-            let mut next = move || {
-                s = s.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-                (s >> 11) as f64 / (1u64 << 53) as f64
-            };
-            for _ in 0..20000 {
-                let wi = spherical((0.0087 + 0.9913 * next()).acos(), TAU * next());
-                let wo = spherical((0.0087 + 0.9913 * next()).acos(), TAU * next());
-                let (a, c) = (f(&wi, &wo), r.eval(&wi, &wo));
-                for k in 0..3 {
-                    num += (a[k] - c[k]).abs() * wo.z;
-                    den += a[k] * wo.z;
-                }
-            }
-            num / den
-        };
+        let l1 =
+            |d: &(dyn Fn(&Vec3) -> f64 + Sync)| hemisphere_l1(&f, &RglBsdf::from_bytes(&file_with("", d, &f)).unwrap());
         let (bare, with) = (l1(&cut), l1(&floored));
         eprintln!("relative L1: {bare} without a floor, {with} with it");
         assert!(with < 0.02, "with a floor: relative L1 {with}");
