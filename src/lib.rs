@@ -11,7 +11,7 @@
 //! | layer | modules | holds |
 //! | --- | --- | --- |
 //! | foundation | [`base`], [`gcode`] | directions and slopes, slope-space densities, heightfields, distances, FFTs, file formats and atomic output, figures; the one G-code model (tokenizer, modal state, move list, writer, program model) |
-//! | machining | [`cut`] | tool shapes, machine profiles and their accuracy (backlash, runout, step grid), drop-cutter, morphology by the tool, the swept stock, the run-time planner |
+//! | machining | [`cut`] | tool shapes, machine profiles and their accuracy (backlash, runout, step grid), drop-cutter, morphology by the tool, the chords a controller cuts, the swept stock, the run-time planner |
 //! | stages | [`stages`]: [`brdf`](stages::brdf) → [`ndf`](stages::ndf) → [`facets`](stages::facets) → [`design`](stages::design) → [`svbrdf`](stages::svbrdf) → [`toolpath`](stages::toolpath) → [`simulate`](stages::simulate) → [`optics`](stages::optics) → [`verify`](stages::verify) | target BRDF → NDF → facet tile → the loop around it → G-code → simulated cut → its BRDF and the verdict |
 //! | applications | [`apps`]: [`stream`](apps::stream), [`analyze`](apps::analyze), [`calibrate`](apps::calibrate) | GRBL streaming and the virtual controller; a measured surface's NDF and BRDF; the coupon that measures a machine's accuracy |
 //! | the job | [`job`] | `JOB.toml`, the runner that sequences the stages and writes their artifacts |

@@ -247,6 +247,48 @@ pub fn opening_f32(h: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, 
         .collect()
 }
 
+/// [`opening_f32`] of a periodic grid, and beside it, when `chords` is given, the surface the bit leaves
+/// when its centre follows the chords of each pass of the CL surface instead ([`crate::cut::chords`]: the
+/// controller's arcs): `erode(chords(dilate(h)))`, from the same dilation. The first is what the bit can
+/// reach; the second is what a controller that cuts arcs as chords leaves, which may stand below `h` by up to
+/// the chords' sagitta.
+pub fn opening_f32_chorded(
+    h: &[f64],
+    nx: usize,
+    ny: usize,
+    pitch: f64,
+    tool: &Shape,
+    chords: Option<crate::cut::chords::PassChords>,
+) -> (Vec<f64>, Option<Vec<f64>>) {
+    let Some(chords) = chords else {
+        return (opening_f32(h, nx, ny, pitch, true, tool), None);
+    };
+    let top = h.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let top = if top.is_finite() { top } else { 0.0 };
+    let rel: Vec<f32> = h.iter().map(|v| (v - top) as f32).collect();
+    let to = |v: f64| v as f32;
+    let cl = dilate(&rel, nx, ny, pitch, true, tool, to);
+    let mut chorded = cl.clone();
+    crate::cut::chords::chord_passes(&mut chorded, nx, ny, pitch, chords, to);
+    let erode = |cl: Vec<f32>| -> Vec<f32> {
+        let neg: Vec<f32> = cl.into_iter().map(|v| -v).collect();
+        dilate(&neg, nx, ny, pitch, true, tool, to)
+            .into_iter()
+            .map(|v| -v)
+            .collect()
+    };
+    let (opened, chorded) = rayon::join(|| erode(cl), || erode(chorded));
+    // the opening is held at or above the surface as in `opening_f32`; the chords are not: on a crest they
+    // pass below the arc, and the bit with them
+    let opened = opened
+        .into_iter()
+        .zip(h)
+        .map(|(v, h)| (top + f64::from(v)).max(*h))
+        .collect();
+    let chorded = chorded.into_iter().map(|v| top + f64::from(v)).collect();
+    (opened, Some(chorded))
+}
+
 /// Samples per tool radius below which [`opening_periodic`] takes the opening on a decimated grid.
 pub const OPENING_SAMPLES_PER_RADIUS: f64 = 24.0;
 
@@ -368,5 +410,47 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// The chorded opening's first part is the opening itself, bit for bit; its chords' cut is a
+    /// ball-eroded CL surface, so it lies on or below the opening where the chords lie below the CL
+    /// surface (crests) and within the chords' sagitta of it everywhere (an erosion moves a surface by at
+    /// most what its input moved; the sagitta is normal to the chord, so vertically at most `t·√(1 + s²)`,
+    /// and the slopes here stay below 0.7).
+    #[test]
+    fn the_chords_cut_departs_from_the_opening_by_at_most_their_sagitta() {
+        use crate::cut::chords::{PassAxis, PassChords};
+        let (n, pitch) = (96, 0.01);
+        let tau = std::f64::consts::TAU;
+        let h: Vec<f64> = (0..n * n)
+            .map(|k| {
+                let (x, y) = ((k % n) as f64 / n as f64, (k / n) as f64 / n as f64);
+                0.05 * (tau * 2.0 * x).sin() * (tau * y).cos()
+            })
+            .collect();
+        let tool = Shape::Ball { diameter_mm: 0.5 };
+        for along in [PassAxis::X, PassAxis::Y] {
+            let sag = 0.002;
+            let (opened, chorded) =
+                opening_f32_chorded(&h, n, n, pitch, &tool, Some(PassChords { sag_mm: sag, along }));
+            assert_eq!(opened, opening_f32(&h, n, n, pitch, true, &tool));
+            let chorded = chorded.expect("chords asked for");
+            let worst = opened
+                .iter()
+                .zip(&chorded)
+                .map(|(a, b)| (a - b).abs())
+                .fold(0.0, f64::max);
+            let moved = opened
+                .iter()
+                .zip(&chorded)
+                .filter(|(a, b)| (*a - *b).abs() > 1e-6)
+                .count();
+            assert!(
+                worst <= sag * (1.0f64 + 0.49).sqrt() + 1e-6,
+                "{along:?}: the chords' cut is {worst} mm from the opening"
+            );
+            assert!(moved > n * n / 10, "{along:?}: only {moved} samples moved");
+        }
+        assert!(opening_f32_chorded(&h, n, n, pitch, &tool, None).1.is_none());
     }
 }

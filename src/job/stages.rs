@@ -52,6 +52,7 @@ pub(super) fn design_stage(
             l1_max: tol.ndf_l1_max,
             highlight: target.highlight(),
             highlight_corr_min: tol.highlight_corr_min,
+            chords: design_chords(ready),
         },
         &mut |p| match p {
             crate::stages::design::Progress::Arrangement(r) => progress(Progress::Arrangement(r)),
@@ -59,6 +60,25 @@ pub(super) fn design_stage(
         },
     )
     .map_err(stage_err("facets"))
+}
+
+/// The chords along the finishing passes the design loop's model cuts: the program's lines, which the
+/// one-sided simplification keeps within `toolpath.tolerance_um` of the CL surface (as the plan raised it
+/// to the machine's grid), and the chords the verdict's simulation cuts arcs as (GRBL's `$12`; none where it
+/// follows arcs), their sagittas added. `None` when the passes lie at an angle to the grid.
+fn design_chords(ready: &Ready) -> Option<crate::cut::chords::PassChords> {
+    let arc_um = ready.job.simulate.config(&ready.toolpath).arc_tolerance_um;
+    let chords_um = if arc_um > super::EXACT_ARC_TOLERANCE_UM {
+        arc_um
+    } else {
+        0.0
+    };
+    let sag_um = chords_um + ready.toolpath.cfg.tolerance_um;
+    (sag_um > 0.0).then_some(())?;
+    Some(crate::cut::chords::PassChords {
+        sag_mm: sag_um * 1e-3,
+        along: crate::cut::chords::PassAxis::of_angle(ready.job.toolpath.angle_deg)?,
+    })
 }
 
 /// The program and its simulated cut.

@@ -19,6 +19,7 @@ use crate::base::distance::correlation;
 use crate::base::heightfield::Heightfield;
 use crate::base::slope::SlopeGrid;
 use crate::base::surface;
+use crate::cut::chords::PassChords;
 use crate::cut::tool::Shape;
 use crate::stages::facets::{self, FacetsConfig, Tile};
 use crate::stages::ndf::{Kernel, Ndf};
@@ -209,6 +210,10 @@ pub struct DesignInput<'a> {
     pub highlight: Option<&'a crate::stages::brdf::Highlight>,
     /// The smallest highlight correlation (the verdict's).
     pub highlight_corr_min: f64,
+    /// The chords the controller cuts arcs as (GRBL's `$12`, along the finishing passes), which the model
+    /// cuts too ([`crate::cut::chords`]); `None` for a controller that follows arcs, or passes at an angle
+    /// to the grid.
+    pub chords: Option<PassChords>,
 }
 
 /// The loop's result.
@@ -357,14 +362,23 @@ fn refine_tile(
 ) {
     let n = input.ndf;
     let pitch = model::model_pitch_mm(tile, &input.tool);
-    let mut h = model::as_milled(tile, &input.tool, pitch);
+    let mut h = model::as_milled(tile, &input.tool, pitch, None).opened;
     let mut aim = n.target.within_cone(cone_tan);
     let mut solver = facets::poisson::PoissonSolver::new(h.nx, h.ny);
     let mut best: Option<(Heightfield, usize)> = None;
     let scale = rounds[*chosen].scale;
     for it in 0..cfg.refine_iterations {
-        refine::iterate(&mut h, &aim, &input.tool, fcfg.max_relief_mm, it, &mut solver);
-        let (round, model) = evaluate_surface(rounds.len() + 1, &h, input, cone_tan, scale);
+        let chorded = refine::iterate(
+            &mut h,
+            &aim,
+            &input.tool,
+            fcfg.max_relief_mm,
+            it,
+            &mut solver,
+            input.chords,
+        );
+        let cut = chorded.map(|z_mm| Heightfield { z_mm, ..h.clone() });
+        let (round, model) = evaluate_surface(rounds.len() + 1, &h, cut.as_ref(), input, cone_tan, scale);
         aim = update::reweighted(&aim, &n.observed, &model, input.scallop, cfg.refine_gain, cone_tan);
         on_progress(Progress::Round(&round));
         if round.score < rounds[*chosen].score {
@@ -403,17 +417,29 @@ pub fn design_ndf(tile: &Tile, base: Option<&Kernel>, domain: crate::base::slope
 }
 
 /// A refined surface's figures as a round. The surface is an opening (`refine::iterate` ends with one), so
-/// it is its own as-milled surface: nothing of it is out of the ball's reach, and it has no facet steps.
+/// it is its own as-milled surface: nothing of it is out of the ball's reach, and it has no facet steps. The
+/// model measures `cut`, the controller's chords' cut of it, where there is one.
 fn evaluate_surface(
     round: usize,
     surface: &Heightfield,
+    cut: Option<&Heightfield>,
     input: &DesignInput,
     cone_tan: f64,
     scale: [f64; 2],
 ) -> (Round, SlopeGrid) {
     let design = with_base(surface_ndf(surface, input.ndf.config.domain()).0, input.base);
     let (lo, hi) = surface.range();
-    let (mut r, model) = figures(round, surface, &design, input, cone_tan, scale, [hi - lo, 0.0, 0.0], 0);
+    let model_surface = cut.unwrap_or(surface);
+    let (mut r, model) = figures(
+        round,
+        model_surface,
+        &design,
+        input,
+        cone_tan,
+        scale,
+        [hi - lo, 0.0, 0.0],
+        0,
+    );
     r.refined = true;
     (r, model)
 }
@@ -439,13 +465,13 @@ fn with_base(g: SlopeGrid, base: Option<&Kernel>) -> SlopeGrid {
 fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale: [f64; 2]) -> (Round, SlopeGrid) {
     let domain = input.ndf.config.domain();
     let pitch = model::model_pitch_mm(tile, &input.tool);
-    let opened = model::as_milled(tile, &input.tool, pitch);
+    let milled = model::as_milled(tile, &input.tool, pitch, input.chords);
     let (design, _) = design_ndf(tile, input.base, domain);
     let (lo, hi) = tile.heightfield.range();
-    let unreachable = model::unreachable_fraction(tile, &opened);
+    let unreachable = model::unreachable_fraction(tile, &milled.opened);
     figures(
         round,
-        &opened,
+        milled.cut(),
         &design,
         input,
         cone_tan,

@@ -6,9 +6,13 @@
 //! slopes are modelled by the scallop lobe (as the verification measures them), so the model's NDF is
 //! `NDF(O) ⊛ K_scallop`, its slopes taken as the milled surface's are: the mean over one stepover across the
 //! passes (`base::surface::stepover_slopes`), so the model smooths the fillets as the measurement does. The opening is taken on the tile rasterised at about a 24th of the ball radius,
-//! periodic, so a round costs a fraction of a second instead of a simulation of the program.
+//! periodic, so a round costs a fraction of a second instead of a simulation of the program. Where the
+//! controller cuts arcs as chords, the slopes are measured on the cut along those chords instead
+//! ([`crate::cut::chords`], DESIGN.md §4.3: each pass of the CL surface as chords, then eroded), which takes
+//! a few percent of the variance along the passes; the reach is the opening's.
 
 use crate::base::heightfield::Heightfield;
+use crate::cut::chords::PassChords;
 use crate::cut::tool::Shape;
 use crate::stages::facets::{self, Tile};
 
@@ -25,15 +29,43 @@ pub fn model_pitch_mm(tile: &Tile, tool: &Shape) -> f64 {
     a / (a / want - 1e-9).ceil()
 }
 
+/// What the ball leaves of a tile: the opening (what it can reach) and, on a controller that cuts arcs as
+/// chords, the cut along those chords.
+pub struct AsMilled {
+    /// The periodic opening of the tile by the ball.
+    pub opened: Heightfield,
+    /// The bit's centre on the chords of each pass of the CL surface ([`crate::cut::chords`]); `None` for a
+    /// controller that follows arcs.
+    pub chorded: Option<Heightfield>,
+}
+
+impl AsMilled {
+    /// The surface the model measures: the chords' cut where there is one, else the opening.
+    #[must_use]
+    pub fn cut(&self) -> &Heightfield {
+        self.chorded.as_ref().unwrap_or(&self.opened)
+    }
+
+    /// The opening of the periodic grid `hf` (and its chords' cut with `chords`).
+    pub fn of(hf: Heightfield, tool: &Shape, chords: Option<PassChords>) -> Self {
+        let (opened, chorded) =
+            crate::cut::morphology::opening_f32_chorded(&hf.z_mm, hf.nx, hf.ny, hf.pitch_mm, tool, chords);
+        let chorded = chorded.map(|z_mm| Heightfield { z_mm, ..hf.clone() });
+        Self {
+            opened: Heightfield { z_mm: opened, ..hf },
+            chorded,
+        }
+    }
+}
+
 /// The periodic opening of `tile` by `tool` on a grid of `pitch_mm` (which must divide the facet side), in
 /// single precision ([`crate::cut::morphology::opening_f32`]: within a nanometre of the double-precision one, at
-/// twice its speed; the model's slopes are differences over a stepover of tens of micrometres).
-pub fn as_milled(tile: &Tile, tool: &Shape, pitch_mm: f64) -> Heightfield {
+/// twice its speed; the model's slopes are differences over a stepover of tens of micrometres), and with
+/// `chords` the cut along the chords of each pass.
+pub fn as_milled(tile: &Tile, tool: &Shape, pitch_mm: f64, chords: Option<PassChords>) -> AsMilled {
     let mut cfg = tile.config;
     cfg.pitch_um = pitch_mm * 1000.0;
-    let mut hf = facets::rasterise(&tile.arrangement, &tile.z_mm, &cfg);
-    hf.z_mm = crate::cut::morphology::opening_f32(&hf.z_mm, hf.nx, hf.ny, hf.pitch_mm, true, tool);
-    hf
+    AsMilled::of(facets::rasterise(&tile.arrangement, &tile.z_mm, &cfg), tool, chords)
 }
 
 /// Fraction of the model's samples the ball cannot reach: the opening above the design by more than
@@ -81,7 +113,7 @@ mod tests {
         let tool = Shape::Ball { diameter_mm: 0.5 };
         let p = model_pitch_mm(&tile, &tool);
         assert!((p - 1.0 / 96.0).abs() < 1e-12, "{p}");
-        let o = as_milled(&tile, &tool, p);
+        let o = as_milled(&tile, &tool, p, None).opened;
         let mut c = tile.config;
         c.pitch_um = p * 1000.0;
         let d = facets::rasterise(&tile.arrangement, &tile.z_mm, &c);

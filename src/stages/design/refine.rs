@@ -21,6 +21,7 @@
 
 use crate::base::heightfield::Heightfield;
 use crate::base::slope::SlopeGrid;
+use crate::cut::chords::PassChords;
 use crate::cut::tool::Shape;
 use crate::stages::facets::poisson::PoissonSolver;
 use rayon::prelude::*;
@@ -168,7 +169,9 @@ fn match_direction(gx: &mut [f64], gy: &mut [f64], target: &SlopeGrid, u: (f64, 
         });
 }
 
-/// One iteration of the module's four projections on the periodic grid `h` (heights, mm, top at 0).
+/// One iteration of the module's four projections on the periodic grid `h` (heights, mm, top at 0). With
+/// `chords`, it also returns the cut a controller leaves of the new `h` along its passes' chords (from the
+/// opening's own dilation: [`crate::cut::morphology::opening_f32_chorded`]), the surface the model measures.
 pub fn iterate(
     h: &mut Heightfield,
     target: &SlopeGrid,
@@ -176,7 +179,8 @@ pub fn iterate(
     budget_mm: f64,
     k: usize,
     solver: &mut PoissonSolver,
-) {
+    chords: Option<PassChords>,
+) -> Option<Vec<f64>> {
     let (nx, ny, p) = (h.nx, h.ny, h.pitch_mm);
     let z = &h.z_mm;
     // edge slopes: gx across the edge from x to x+1, gy from y to y+1 (cyclic)
@@ -206,7 +210,9 @@ pub fn iterate(
             *v = v.max(-budget_mm);
         }
     });
-    h.z_mm = crate::cut::morphology::opening_f32(&out, nx, ny, p, true, tool);
+    let (opened, chorded) = crate::cut::morphology::opening_f32_chorded(&out, nx, ny, p, tool, chords);
+    h.z_mm = opened;
+    chorded
 }
 
 /// `hf` resampled (periodic bilinear) onto a grid of `pitch_mm` over the same period, which it must divide.
@@ -329,7 +335,7 @@ mod tests {
         let first = ndf(&h).relative_l1(&target);
         let mut solver = PoissonSolver::new(n, n);
         for k in 0..6 {
-            iterate(&mut h, &target, &tool, budget, k, &mut solver);
+            iterate(&mut h, &target, &tool, budget, k, &mut solver, None);
         }
         let (lo, hi) = h.range();
         assert!(hi.abs() < 1e-9 && lo >= -budget - 1e-12, "range {lo}..{hi}");
