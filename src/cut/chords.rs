@@ -1,15 +1,17 @@
 //! The chords a controller cuts instead of the curve a program asks for, on a cutter-location (CL) grid:
 //! the design loop's model of GRBL's arcs (docs/MACHINE.md §3.1, DESIGN.md §4.3).
 //!
-//! GRBL's `mc_arc` replaces every `G2`/`G3` with straight segments whose vertices lie on the arc and whose
-//! sagitta is at most `$12`; along a finishing pass the bit's centre then follows a polyline, and the
-//! surface it leaves holds one slope per segment where the arc swept a range of them. A segment of angle
-//! `Δθ = 2√(2t/R)` on a path of radius `R` loses the variance of a uniform spread of width `Δθ`,
-//! `Δθ²/12 = 2t/(3R)` of squared slope: a millimetre-scale bow at `t` = 1 µm loses a few 10⁻⁴, a few percent
-//! of a narrow lobe's variance along the passes. The model replaces each pass of the CL surface with the
-//! longest chords whose sagitta stays within `t`, vertices on the CL samples, taken greedily from the pass's
-//! start: the same sagitta bound the controller keeps, so the same segment lengths where the path is a
-//! circle. The program's lines chord the CL surface too (the one-sided simplification, within
+//! GRBL's `mc_arc` replaces every `G2`/`G3` with straight segments whose vertices lie on the arc: `⌊A/L⌋` of
+//! them for an arc `A` long, `L = 2√(t(2R − t))` the chord whose sagitta is `$12` = `t`. Along a finishing
+//! pass the bit's centre then follows a polyline, and the surface it leaves holds one slope per segment
+//! where the arc swept a range of them. A segment of angle `Δθ = 2√(2t/R)` on a path of radius `R` loses
+//! the variance of a uniform spread of width `Δθ`, `Δθ²/12 = 2t/(3R)` of squared slope: a millimetre-scale
+//! bow at `t` = 1 µm loses a few 10⁻⁴, a few percent of a narrow lobe's variance along the passes. The model
+//! replaces each pass of the CL surface with chords whose sagitta stays within `t`, vertices on the CL
+//! samples, taken greedily from the pass's start: on a long arc GRBL's segments are that long. The count
+//! is rounded down, so GRBL's are never shorter: an arc between `L` and `2L` long is one chord of sagitta
+//! up to `4t`, which the model does not see (the ball's own radius over a facet edge is such an arc). The
+//! program's lines chord the CL surface too (the one-sided simplification, within
 //! `toolpath.tolerance_um`): the job gives the design loop `t` as that tolerance plus `$12`
 //! (`job::stages`, an approximation measured in DESIGN.md §4.3).
 
@@ -48,13 +50,14 @@ pub struct PassChords {
     pub along: PassAxis,
 }
 
-/// The greatest distance, normal to the chord, of the samples `c[1..n−1]` from the chord `c[0]`–`c[n−1]`
-/// (samples `pitch` apart). The samples must be finite ([`chord_pass`] leaves a pass that is not alone).
-fn chord_sag(c: &[f64], pitch: f64) -> f64 {
+/// The greatest distance, normal to the chord, of the samples `c[1..n−1]` from the chord `c[0]`–`c[n−1]`,
+/// mm (heights in mm, samples `pitch_mm` apart). The samples must be finite ([`chord_pass`] leaves a pass
+/// with any that is not alone).
+fn chord_sag(c: &[f64], pitch_mm: f64) -> f64 {
     let n = c.len() - 1;
     let (a, b) = (c[0], c[n]);
     let rise = (b - a) / n as f64;
-    let slope = rise / pitch;
+    let slope = rise / pitch_mm;
     // branch-free, so that it compiles to vector instructions
     let mut worst = 0.0f64;
     let mut line = a;
@@ -66,13 +69,15 @@ fn chord_sag(c: &[f64], pitch: f64) -> f64 {
     worst / (1.0 + slope * slope).sqrt()
 }
 
-/// The farthest sample `j > i` of `c` whose chord from `i` keeps within `sag` ([`chord_sag`]), searched from
+/// A farthest sample `j > i` of `c` whose chord from `i` keeps within `sag_mm` ([`chord_sag`]), searched from
 /// `guess` samples on (the previous chord's span: the curvature changes slowly along a pass, so two probes
 /// usually settle it): up by doubling steps while chords fit, or down by doubling steps until one fits, then
-/// bisection between the last that fitted and the first that did not. `i + 1` always fits.
-fn longest_chord(c: &[f64], i: usize, guess: usize, pitch: f64, sag: f64) -> usize {
+/// bisection between the last that fitted and the first that did not. `i + 1` always fits. Past an
+/// inflection a chord may fit again after one that did not, so the end found is locally, not always
+/// globally, the farthest.
+fn longest_chord(c: &[f64], i: usize, guess: usize, pitch_mm: f64, sag_mm: f64) -> usize {
     let last = c.len() - 1;
-    let fits = |j: usize| chord_sag(&c[i..=j], pitch) <= sag;
+    let fits = |j: usize| chord_sag(&c[i..=j], pitch_mm) <= sag_mm;
     let g = (i + guess.max(2)).min(last);
     // the bracket: `ok` fits, `bad` does not (or lies past the end)
     let (mut ok, mut bad) = (i + 1, last + 1);
@@ -113,10 +118,11 @@ fn longest_chord(c: &[f64], i: usize, guess: usize, pitch: f64, sag: f64) -> usi
     ok
 }
 
-/// One pass `c` (samples `pitch` apart) replaced by the longest chords from its start whose sagitta is at
-/// most `sag` (the longest from each vertex in turn, found by doubling and bisection); the samples between
-/// are moved onto the chord. A pass with a sample that is not finite (no surface there) is left as it is.
-pub fn chord_pass(c: &mut [f64], pitch: f64, sag: f64) {
+/// One pass `c` (heights, mm, samples `pitch_mm` apart) replaced by the longest chords from its start whose
+/// sagitta is at most `sag_mm` (from each vertex in turn, found by doubling and bisection); the samples
+/// between are moved onto the chord. A pass with a sample that is not finite (no surface there) is left as
+/// it is. The pass is taken as open: on a periodic grid its first and last samples are vertices.
+pub fn chord_pass(c: &mut [f64], pitch_mm: f64, sag_mm: f64) {
     let n = c.len();
     if !c.iter().all(|v| v.is_finite()) {
         return;
@@ -124,7 +130,7 @@ pub fn chord_pass(c: &mut [f64], pitch: f64, sag: f64) {
     let mut i = 0;
     let mut span = 2;
     while i + 2 < n {
-        let ok = longest_chord(c, i, span, pitch, sag);
+        let ok = longest_chord(c, i, span, pitch_mm, sag_mm);
         let (a, b) = (c[i], c[ok]);
         let len = (ok - i) as f64;
         for (k, v) in c[i + 1..ok].iter_mut().enumerate() {
@@ -135,13 +141,13 @@ pub fn chord_pass(c: &mut [f64], pitch: f64, sag: f64) {
     }
 }
 
-/// The CL grid `cl` (`nx × ny`, row-major, `pitch` apart) with every pass along `chords.along` replaced by
+/// The CL grid `cl` (`nx × ny`, row-major, `pitch_mm` apart) with every pass along `chords.along` replaced by
 /// its chords ([`chord_pass`]), passes in parallel; `to_sample` writes a height back in the grid's type.
 pub fn chord_passes<T: Copy + Into<f64> + Send + Sync>(
     cl: &mut [T],
     nx: usize,
     ny: usize,
-    pitch: f64,
+    pitch_mm: f64,
     chords: PassChords,
     to_sample: impl Fn(f64) -> T + Sync,
 ) {
@@ -150,7 +156,7 @@ pub fn chord_passes<T: Copy + Into<f64> + Send + Sync>(
             || vec![0.0; nx],
             |buf, row| {
                 buf.iter_mut().zip(row.iter()).for_each(|(b, v)| *b = (*v).into());
-                chord_pass(buf, pitch, chords.sag_mm);
+                chord_pass(buf, pitch_mm, chords.sag_mm);
                 row.iter_mut().zip(buf.iter()).for_each(|(v, b)| *v = to_sample(*b));
             },
         ),
@@ -159,7 +165,7 @@ pub fn chord_passes<T: Copy + Into<f64> + Send + Sync>(
                 .into_par_iter()
                 .map(|i| {
                     let mut col: Vec<f64> = (0..ny).map(|j| cl[j * nx + i].into()).collect();
-                    chord_pass(&mut col, pitch, chords.sag_mm);
+                    chord_pass(&mut col, pitch_mm, chords.sag_mm);
                     col
                 })
                 .collect();
@@ -183,11 +189,11 @@ mod tests {
         assert_eq!(PassAxis::of_angle(45.0), None);
     }
 
-    /// On a circle of radius R the chords of sagitta t span `2√(t(2R − t))` each (GRBL's own segment,
-    /// `mc_arc`), every chord's vertices on the circle and its samples within t of it; and the slope variance
+    /// On a circle of radius R the chords of sagitta t span `2√(t(2R − t))` each (the segment `mc_arc`
+    /// rounds its count to, on a long arc), every chord's vertices on the circle and its samples within t of it; and the slope variance
     /// the chords leave is the circle's less `Δθ²/12` (the module's loss), to the sampling.
     #[test]
-    fn chords_of_a_circle_have_grbls_length_and_lose_the_closed_form_variance() {
+    fn chords_of_a_circle_have_the_sagittas_length_and_lose_the_closed_form_variance() {
         let (r, t, pitch) = (2.0, 0.001, 0.0005);
         let half = 1.0; // x from −1 to 1 mm: slopes up to tan 30°
         let n = (2.0 * half / pitch) as usize + 1;

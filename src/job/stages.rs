@@ -68,13 +68,16 @@ pub(super) fn design_stage(
 /// follows arcs), their sagittas added. `None` when the passes lie at an angle to the grid.
 fn design_chords(ready: &Ready) -> Option<crate::cut::chords::PassChords> {
     let arc_um = ready.job.simulate.config(&ready.toolpath).arc_tolerance_um;
-    let chords_um = if arc_um > super::EXACT_ARC_TOLERANCE_UM {
+    // a program written without arcs (`toolpath.arcs = false`) gives the controller none to chord
+    let chords_um = if ready.toolpath.cfg.arcs && arc_um > super::EXACT_ARC_TOLERANCE_UM {
         arc_um
     } else {
         0.0
     };
     let sag_um = chords_um + ready.toolpath.cfg.tolerance_um;
-    (sag_um > 0.0).then_some(())?;
+    if sag_um <= 0.0 {
+        return None;
+    }
     Some(crate::cut::chords::PassChords {
         sag_mm: sag_um * 1e-3,
         along: crate::cut::chords::PassAxis::of_angle(ready.job.toolpath.angle_deg)?,

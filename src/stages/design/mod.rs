@@ -481,12 +481,13 @@ fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale
     )
 }
 
-/// The figures of an as-milled surface `opened` against the target; `design` is the design's NDF and
-/// `[relief_mm, rms_step_um, unreachable]` its shape figures.
+/// The figures of an as-milled surface `cut` (the opening, or its cut along the controller's chords)
+/// against the target; `design` is the design's NDF and `[relief_mm, rms_step_um, unreachable]` its shape
+/// figures.
 #[allow(clippy::too_many_arguments)]
 fn figures(
     round: usize,
-    opened: &Heightfield,
+    cut: &Heightfield,
     design: &SlopeGrid,
     input: &DesignInput,
     cone_tan: f64,
@@ -496,12 +497,7 @@ fn figures(
 ) -> (Round, SlopeGrid) {
     let n = input.ndf;
     let domain = n.config.domain();
-    let slopes = surface::stepover_slopes(
-        opened,
-        [0, 0, opened.nx, opened.ny],
-        input.raster_angle_deg,
-        input.stepover_mm,
-    );
+    let slopes = surface::stepover_slopes(cut, [0, 0, cut.nx, cut.ny], input.raster_angle_deg, input.stepover_mm);
     let (raw, _) = surface::ndf_of_slopes(&slopes, domain);
     let mut milled = input.scallop.convolve(&raw);
     milled.normalise();

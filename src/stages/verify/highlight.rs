@@ -28,12 +28,14 @@ fn check(corr: f64, tol: &Tolerances) -> Check {
     }
 }
 
-/// Render the target's observed distribution (from `ndf`, with the tilt it removed), `design` and `milled`
-/// in the image's configuration, add the check to both surfaces'
-/// verdicts, and draw the figure.
+/// Render the target's observed distribution (from `ndf`, with the tilt it removed), the NDF stage's
+/// deconvolved target blurred again by the `base` lobe, `design` and `milled` in the image's configuration,
+/// add the check to both surfaces' verdicts, and draw the figure.
+#[allow(clippy::too_many_arguments)]
 pub fn compare(
     h: &Highlight,
     ndf: &crate::stages::ndf::Ndf,
+    base: Option<&crate::stages::ndf::Kernel>,
     design: &SlopeGrid,
     milled: &SlopeGrid,
     design_m: &mut SurfaceMetrics,
@@ -43,6 +45,15 @@ pub fn compare(
     let (tilt, observed) = (&ndf.tilt, &ndf.observed);
     let t = (tilt.p, tilt.q);
     let grid_corr = h.correlation(observed, t);
+    // what any slopes drawn under the base lobe can show: the deconvolved target (the aim) blurred by it
+    let lobe_corr = match base {
+        Some(k) => {
+            let mut blurred = k.convolve(&ndf.target);
+            blurred.normalise();
+            h.correlation(&blurred, t)
+        }
+        None => grid_corr,
+    };
     let design_corr = h.correlation(design, t);
     let (rendered, w, hh) = h.render(milled, t);
     let (image, _, _) = h.compare_image();
@@ -61,7 +72,7 @@ pub fn compare(
     let figure = Figure::new(
         "Highlight",
         format!(
-            "Left, the highlight asked for ({}, {} × {} px, compared at {w} × {hh}); right, the light the simulated milled surface reflects in the same configuration: a collimated light along the normal and a screen parallel to the part, seen from above (image right = +x, up = +y), the ends of the image's longer axis at {}° of reflection. One linear colour scale, topped at the image's brightest pixel (brighter rendered pixels drawn at the top). Correlation {milled_corr:.3} (the design tile's {design_corr:.3}; the target as the NDF grid holds it, the most any design could reach, {grid_corr:.3}).",
+            "Left, the highlight asked for ({}, {} × {} px, compared at {w} × {hh}); right, the light the simulated milled surface reflects in the same configuration: a collimated light along the normal and a screen parallel to the part, seen from above (image right = +x, up = +y), the ends of the image's longer axis at {}° of reflection. One linear colour scale, topped at the image's brightest pixel (brighter rendered pixels drawn at the top). Correlation {milled_corr:.3} (the design tile's {design_corr:.3}; the target blurred by the scallop and polish lobe, the most any slopes under that lobe could reach, {lobe_corr:.3}; the target as the NDF grid holds it, {grid_corr:.3}).",
             h.path.file_name().map(|f| f.to_string_lossy().to_string()).unwrap_or_default(),
             h.w,
             h.h,
@@ -78,6 +89,7 @@ pub fn compare(
             compared_px: [w, hh],
             milled_corr,
             design_corr,
+            lobe_corr,
             grid_corr,
         },
         figure,
@@ -101,6 +113,11 @@ pub fn why(h: &HighlightMetrics, tol: &Tolerances) -> String {
         format!(
             "Already the target as the NDF grid holds it reaches only {:.3}: the grid's cells are coarse for this image (raise `ndf.res` or lower `ndf.max_angle_deg` towards the image's extent).",
             h.grid_corr
+        )
+    } else if h.lobe_corr < tol.highlight_corr_min {
+        format!(
+            "The target as the NDF grid holds it reaches {:.3}, but blurred by the scallop and polish lobe every slope carries it reaches only {:.3}, whatever the design (the NDF stage's deconvolved target blurred again): the image's edges are sharper than the lobe draws. A finer polish (the material's), a smaller `toolpath.scallop_um` or an image with softer edges would help; the design tile reaches {:.3}.",
+            h.grid_corr, h.lobe_corr, h.design_corr
         )
     } else if h.design_corr < tol.highlight_corr_min {
         format!(

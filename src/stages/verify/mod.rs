@@ -134,4 +134,8 @@ pub struct HighlightMetrics {
     /// … of the target's observed distribution as the NDF grid holds it: the most any design could reach
     /// on this grid.
     pub grid_corr: f64,
+    /// … of the NDF stage's deconvolved target blurred again by the base lobe (the scallop and polish lobe):
+    /// the most any slopes could reach under that lobe, up to the deconvolution's own error.
+    #[serde(default)]
+    pub lobe_corr: f64,
 }

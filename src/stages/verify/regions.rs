@@ -362,7 +362,16 @@ fn region(
     let mut design_m = metrics::measure(&r.ndf.observed, &design, r.target, &cfg.incident_deg, &tol, cone_tan);
     let mut milled_m = metrics::measure(&r.ndf.observed, &milled, r.target, &cfg.incident_deg, &tol, cone_tan);
     if let Some(h) = r.target.highlight() {
-        let c = super::highlight::compare(h, r.ndf, &design, &milled, &mut design_m, &mut milled_m, &tol);
+        let c = super::highlight::compare(
+            h,
+            r.ndf,
+            input.base,
+            &design,
+            &milled,
+            &mut design_m,
+            &mut milled_m,
+            &tol,
+        );
         figures.push(Figure {
             title: format!("Region `{}`: highlight", r.name),
             ..c.figure

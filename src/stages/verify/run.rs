@@ -180,7 +180,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
     let highlight = input
         .target
         .highlight()
-        .map(|h| highlight::compare(h, n, &design, &milled, &mut design_m, &mut milled_m, &tol));
+        .map(|h| highlight::compare(h, n, input.base, &design, &milled, &mut design_m, &mut milled_m, &tol));
     let milled_ideal = match input.ideal {
         Some((sim, tool)) => {
             let ideal = VerifyInput {
@@ -329,7 +329,7 @@ pub fn measure_cut(cfg: &VerifyConfig, input: &VerifyInput, design: &SlopeGrid) 
     let mut m = metrics::measure(&n.observed, &milled, input.target, &cfg.incident_deg, &tol, cone_tan);
     if let Some(h) = input.target.highlight() {
         let mut d = metrics::measure(&n.observed, design, input.target, &cfg.incident_deg, &tol, cone_tan);
-        highlight::compare(h, n, design, &milled, &mut d, &mut m, &tol);
+        highlight::compare(h, n, input.base, design, &milled, &mut d, &mut m, &tol);
     }
     Ok(m)
 }
