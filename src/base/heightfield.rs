@@ -34,6 +34,19 @@ impl Heightfield {
         }
     }
 
+    /// The same grid (size, pitch, periodicity) with the heights `z_mm`, which must have as many samples.
+    #[must_use]
+    pub fn with_heights(&self, z_mm: Vec<f64>) -> Self {
+        debug_assert_eq!(z_mm.len(), self.nx * self.ny);
+        Self {
+            nx: self.nx,
+            ny: self.ny,
+            pitch_mm: self.pitch_mm,
+            periodic: self.periodic,
+            z_mm,
+        }
+    }
+
     /// The height at sample `(i, j)`.
     #[inline]
     pub fn at(&self, i: usize, j: usize) -> f64 {

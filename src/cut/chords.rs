@@ -190,8 +190,9 @@ mod tests {
     }
 
     /// On a circle of radius R the chords of sagitta t span `2√(t(2R − t))` each (the segment `mc_arc`
-    /// rounds its count to, on a long arc), every chord's vertices on the circle and its samples within t of it; and the slope variance
-    /// the chords leave is the circle's less `Δθ²/12` (the module's loss), to the sampling.
+    /// rounds its count to, on a long arc), every chord's vertices on the circle and its samples within t of
+    /// it; and the slope variance the chords leave is the circle's less `Δθ²/12` (the module's loss), to the
+    /// sampling.
     #[test]
     fn chords_of_a_circle_have_the_sagittas_length_and_lose_the_closed_form_variance() {
         let (r, t, pitch) = (2.0, 0.001, 0.0005);

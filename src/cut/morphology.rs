@@ -223,10 +223,42 @@ fn open<T: Sample + std::ops::Neg<Output = T>>(
     to_sample: impl Fn(f64) -> T,
 ) -> Vec<T> {
     let cl = dilate(h, nx, ny, pitch, periodic, tool, &to_sample);
+    erode(cl, nx, ny, pitch, periodic, tool, to_sample)
+}
+
+/// The surface the bit leaves when its tip follows the CL surface `cl`: the negated dilation of the negated
+/// CL surface.
+fn erode<T: Sample + std::ops::Neg<Output = T>>(
+    cl: Vec<T>,
+    nx: usize,
+    ny: usize,
+    pitch: f64,
+    periodic: bool,
+    tool: &Shape,
+    to_sample: impl Fn(f64) -> T,
+) -> Vec<T> {
     let neg: Vec<T> = cl.into_iter().map(|v| -v).collect();
     dilate(&neg, nx, ny, pitch, periodic, tool, &to_sample)
         .into_iter()
         .map(|v| -v)
+        .collect()
+}
+
+/// `h` relative to its highest sample, in single precision (a 1.4 mm relief keeps 0.12 nm steps), and that
+/// highest sample.
+fn relative_f32(h: &[f64]) -> (f64, Vec<f32>) {
+    let top = h.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+    let top = if top.is_finite() { top } else { 0.0 };
+    (top, h.iter().map(|v| (v - top) as f32).collect())
+}
+
+/// An opening taken on [`relative_f32`] heights, back in millimetres: an opening never lies below the
+/// surface, and the rounding could put it a hair under, so it is held there.
+fn held_on(opened: Vec<f32>, top: f64, h: &[f64]) -> Vec<f64> {
+    opened
+        .into_iter()
+        .zip(h)
+        .map(|(v, h)| (top + f64::from(v)).max(*h))
         .collect()
 }
 
@@ -236,15 +268,8 @@ fn open<T: Sample + std::ops::Neg<Output = T>>(
 /// it is held at or above the surface, as an opening is. The design loop's as-milled model uses it; the
 /// verification's reach check keeps [`opening`].
 pub fn opening_f32(h: &[f64], nx: usize, ny: usize, pitch: f64, periodic: bool, tool: &Shape) -> Vec<f64> {
-    let top = h.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let top = if top.is_finite() { top } else { 0.0 };
-    let rel: Vec<f32> = h.iter().map(|v| (v - top) as f32).collect();
-    // an opening never lies below the surface; the rounding could put it a hair under, so it is held there
-    open(&rel, nx, ny, pitch, periodic, tool, |v| v as f32)
-        .into_iter()
-        .zip(h)
-        .map(|(v, h)| (top + f64::from(v)).max(*h))
-        .collect()
+    let (top, rel) = relative_f32(h);
+    held_on(open(&rel, nx, ny, pitch, periodic, tool, |v| v as f32), top, h)
 }
 
 /// [`opening_f32`] of a periodic grid, and beside it, when `chords` is given, the surface the bit leaves
@@ -263,30 +288,17 @@ pub fn opening_f32_chorded(
     let Some(chords) = chords else {
         return (opening_f32(h, nx, ny, pitch, true, tool), None);
     };
-    let top = h.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    let top = if top.is_finite() { top } else { 0.0 };
-    let rel: Vec<f32> = h.iter().map(|v| (v - top) as f32).collect();
+    let (top, rel) = relative_f32(h);
     let to = |v: f64| v as f32;
     let cl = dilate(&rel, nx, ny, pitch, true, tool, to);
     let mut chorded = cl.clone();
     crate::cut::chords::chord_passes(&mut chorded, nx, ny, pitch, chords, to);
-    let erode = |cl: Vec<f32>| -> Vec<f32> {
-        let neg: Vec<f32> = cl.into_iter().map(|v| -v).collect();
-        dilate(&neg, nx, ny, pitch, true, tool, to)
-            .into_iter()
-            .map(|v| -v)
-            .collect()
-    };
+    let erode = |cl| erode(cl, nx, ny, pitch, true, tool, to);
     let (opened, chorded) = rayon::join(|| erode(cl), || erode(chorded));
-    // the opening is held at or above the surface as in `opening_f32`; the chords are not: on a crest they
-    // pass below the arc, and the bit with them
-    let opened = opened
-        .into_iter()
-        .zip(h)
-        .map(|(v, h)| (top + f64::from(v)).max(*h))
-        .collect();
+    // the opening is held at or above the surface as `opening_f32`'s is; the chords' cut is not: on a crest
+    // they pass below the arc, and the bit with them
     let chorded = chorded.into_iter().map(|v| top + f64::from(v)).collect();
-    (opened, Some(chorded))
+    (held_on(opened, top, h), Some(chorded))
 }
 
 /// Samples per tool radius below which [`opening_periodic`] takes the opening on a decimated grid.

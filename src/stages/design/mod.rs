@@ -377,7 +377,7 @@ fn refine_tile(
             &mut solver,
             input.chords,
         );
-        let cut = chorded.map(|z_mm| Heightfield { z_mm, ..h.clone() });
+        let cut = chorded.map(|z_mm| h.with_heights(z_mm));
         let (round, model) = evaluate_surface(rounds.len() + 1, &h, cut.as_ref(), input, cone_tan, scale);
         aim = update::reweighted(&aim, &n.observed, &model, input.scallop, cfg.refine_gain, cone_tan);
         on_progress(Progress::Round(&round));
@@ -468,7 +468,7 @@ fn evaluate(round: usize, tile: &Tile, input: &DesignInput, cone_tan: f64, scale
     let milled = model::as_milled(tile, &input.tool, pitch, input.chords);
     let (design, _) = design_ndf(tile, input.base, domain);
     let (lo, hi) = tile.heightfield.range();
-    let unreachable = model::unreachable_fraction(tile, &milled.opened);
+    let unreachable = model::unreachable_fraction(&milled);
     figures(
         round,
         milled.cut(),

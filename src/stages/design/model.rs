@@ -30,8 +30,10 @@ pub fn model_pitch_mm(tile: &Tile, tool: &Shape) -> f64 {
 }
 
 /// What the ball leaves of a tile: the opening (what it can reach) and, on a controller that cuts arcs as
-/// chords, the cut along those chords.
+/// chords, the cut along those chords; beside them the tile rasterised on the same grid.
 pub struct AsMilled {
+    /// The tile's facets rasterised on the model's grid (what the opening is taken of).
+    pub design: Heightfield,
     /// The periodic opening of the tile by the ball.
     pub opened: Heightfield,
     /// The bit's centre on the chords of each pass of the CL surface ([`crate::cut::chords`]); `None` for a
@@ -45,17 +47,6 @@ impl AsMilled {
     pub fn cut(&self) -> &Heightfield {
         self.chorded.as_ref().unwrap_or(&self.opened)
     }
-
-    /// The opening of the periodic grid `hf` (and its chords' cut with `chords`).
-    pub fn of(hf: Heightfield, tool: &Shape, chords: Option<PassChords>) -> Self {
-        let (opened, chorded) =
-            crate::cut::morphology::opening_f32_chorded(&hf.z_mm, hf.nx, hf.ny, hf.pitch_mm, tool, chords);
-        let chorded = chorded.map(|z_mm| Heightfield { z_mm, ..hf.clone() });
-        Self {
-            opened: Heightfield { z_mm: opened, ..hf },
-            chorded,
-        }
-    }
 }
 
 /// The periodic opening of `tile` by `tool` on a grid of `pitch_mm` (which must divide the facet side), in
@@ -65,15 +56,20 @@ impl AsMilled {
 pub fn as_milled(tile: &Tile, tool: &Shape, pitch_mm: f64, chords: Option<PassChords>) -> AsMilled {
     let mut cfg = tile.config;
     cfg.pitch_um = pitch_mm * 1000.0;
-    AsMilled::of(facets::rasterise(&tile.arrangement, &tile.z_mm, &cfg), tool, chords)
+    let hf = facets::rasterise(&tile.arrangement, &tile.z_mm, &cfg);
+    let (opened, chorded) =
+        crate::cut::morphology::opening_f32_chorded(&hf.z_mm, hf.nx, hf.ny, hf.pitch_mm, tool, chords);
+    AsMilled {
+        chorded: chorded.map(|z_mm| hf.with_heights(z_mm)),
+        opened: hf.with_heights(opened),
+        design: hf,
+    }
 }
 
 /// Fraction of the model's samples the ball cannot reach: the opening above the design by more than
-/// [`crate::cut::morphology::REACH_TOLERANCE_UM`] (the design rasterised on the same grid).
-pub fn unreachable_fraction(tile: &Tile, opened: &Heightfield) -> f64 {
-    let mut cfg = tile.config;
-    cfg.pitch_um = opened.pitch_mm * 1000.0;
-    let design = facets::rasterise(&tile.arrangement, &tile.z_mm, &cfg);
+/// [`crate::cut::morphology::REACH_TOLERANCE_UM`].
+pub fn unreachable_fraction(milled: &AsMilled) -> f64 {
+    let (design, opened) = (&milled.design, &milled.opened);
     let tol = crate::cut::morphology::REACH_TOLERANCE_UM * 1e-3;
     let n = design
         .z_mm
@@ -113,7 +109,8 @@ mod tests {
         let tool = Shape::Ball { diameter_mm: 0.5 };
         let p = model_pitch_mm(&tile, &tool);
         assert!((p - 1.0 / 96.0).abs() < 1e-12, "{p}");
-        let o = as_milled(&tile, &tool, p, None).opened;
+        let milled = as_milled(&tile, &tool, p, None);
+        let o = &milled.opened;
         let mut c = tile.config;
         c.pitch_um = p * 1000.0;
         let d = facets::rasterise(&tile.arrangement, &tile.z_mm, &c);
@@ -127,7 +124,7 @@ mod tests {
                 assert!((o.at(i, j) - d.at(i, j)).abs() < 1e-6, "facet ({fx},{fy}) centre moved");
             }
         }
-        let u = unreachable_fraction(&tile, &o);
+        let u = unreachable_fraction(&milled);
         assert!(u > 0.0 && u < 0.5, "{u}");
     }
 

@@ -28,6 +28,30 @@ fn check(corr: f64, tol: &Tolerances) -> Check {
     }
 }
 
+/// Put the highlight check with correlation `corr` into a surface's verdict. A drawn highlight has no single
+/// peak: its densest slope is wherever the image is brightest and the Jacobian largest (its rim), so the
+/// peak check is replaced by the image's correlation.
+fn add_check(m: &mut SurfaceMetrics, corr: f64, tol: &Tolerances) {
+    for p in m.checks.iter_mut().filter(|p| p.name == super::metrics::PEAK_CHECK) {
+        p.tolerance = "not checked: a drawn highlight has no single peak".into();
+        p.pass = true;
+    }
+    m.checks.push(check(corr, tol));
+    m.pass = m.checks.iter().all(|c| c.pass);
+}
+
+/// The check [`compare`] adds to the milled surface's verdict, alone: for a further cut of the same design
+/// (a perfect machine's), whose target-side figures and figure `compare` already made.
+pub fn check_cut(
+    h: &Highlight,
+    ndf: &crate::stages::ndf::Ndf,
+    milled: &SlopeGrid,
+    m: &mut SurfaceMetrics,
+    tol: &Tolerances,
+) {
+    add_check(m, h.correlation(milled, (ndf.tilt.p, ndf.tilt.q)), tol);
+}
+
 /// Render the target's observed distribution (from `ndf`, with the tilt it removed), the NDF stage's
 /// deconvolved target blurred again by the `base` lobe, `design` and `milled` in the image's configuration,
 /// add the check to both surfaces' verdicts, and draw the figure.
@@ -58,16 +82,8 @@ pub fn compare(
     let (rendered, w, hh) = h.render(milled, t);
     let (image, _, _) = h.compare_image();
     let milled_corr = crate::stages::brdf::highlight::pearson(image, &rendered);
-    for (m, c) in [(design_m, design_corr), (milled_m, milled_corr)] {
-        // A drawn highlight has no single peak: its densest slope is wherever the image is brightest and
-        // the Jacobian largest (its rim), so the peak check is replaced by the image's correlation.
-        for p in m.checks.iter_mut().filter(|p| p.name == super::metrics::PEAK_CHECK) {
-            p.tolerance = "not checked: a drawn highlight has no single peak".into();
-            p.pass = true;
-        }
-        m.checks.push(check(c, tol));
-        m.pass = m.checks.iter().all(|c| c.pass);
-    }
+    add_check(design_m, design_corr, tol);
+    add_check(milled_m, milled_corr, tol);
     let canvas = h.figure(&rendered, "milled surface's highlight");
     let figure = Figure::new(
         "Highlight",

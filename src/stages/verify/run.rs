@@ -189,7 +189,7 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
                 base_is_scallop: false,
                 ..*input
             };
-            measure_cut(cfg, &ideal, &design)?
+            measure_cut(cfg, &ideal)?
         }
         None => milled_m.clone(),
     };
@@ -319,17 +319,15 @@ pub fn run(cfg: &VerifyConfig, input: &VerifyInput) -> Result<VerifyOutput, Veri
 }
 
 /// The figures of the cut `input.sim` against the target, as the verdict measures the milled surface (the
-/// highlight's correlation included for a drawn target). `design` is the design tile's NDF, which the
-/// highlight comparison needs beside it.
-pub fn measure_cut(cfg: &VerifyConfig, input: &VerifyInput, design: &SlopeGrid) -> Result<SurfaceMetrics, VerifyError> {
+/// highlight's correlation included for a drawn target).
+pub fn measure_cut(cfg: &VerifyConfig, input: &VerifyInput) -> Result<SurfaceMetrics, VerifyError> {
     let n = input.ndf;
     let tol = cfg.tolerances;
     let (milled, _, _) = milled_ndf(cfg, input)?;
     let cone_tan = input.cone_deg.to_radians().tan();
     let mut m = metrics::measure(&n.observed, &milled, input.target, &cfg.incident_deg, &tol, cone_tan);
     if let Some(h) = input.target.highlight() {
-        let mut d = metrics::measure(&n.observed, design, input.target, &cfg.incident_deg, &tol, cone_tan);
-        highlight::compare(h, n, input.base, design, &milled, &mut d, &mut m, &tol);
+        highlight::check_cut(h, n, &milled, &mut m, &tol);
     }
     Ok(m)
 }
